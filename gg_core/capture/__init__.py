@@ -1,0 +1,1 @@
+"""Capture folders: layout, cameras, images, validation, importers from other layouts."""

@@ -1,0 +1,1 @@
+"""Thin CLI adapters: parse options, call the domain/stage code, print results."""

@@ -1,0 +1,1 @@
+"""Triangle-mesh geometry: file I/O, topology, remeshing, UV atlases, ray casting."""

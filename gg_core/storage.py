@@ -1,0 +1,75 @@
+"""Crash-safe writes: everything goes to a temporary name in the target folder, then is renamed.
+
+A cancelled or crashed stage therefore never leaves a half-written file under a final name.
+"""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import tempfile
+import time
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[Path]:
+    """Yield a temporary path next to `path`; rename it onto `path` only if the block succeeds."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix if suffix is not None else path.suffix,
+                               dir=path.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, path)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> Path:
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(obj, indent=2, default=_json_default) + "\n")
+    return Path(path)
+
+
+def write_npz(path: str | os.PathLike, **arrays: Any) -> Path:
+    with atomic_path(path, suffix=".npz") as tmp:
+        np.savez_compressed(tmp, **arrays)
+    return Path(path)
+
+
+def write_report(project: str | os.PathLike, stage: str, payload: dict) -> Path:
+    """Write `<project>/reports/<stage>.json` with versions and a timestamp added."""
+    report = {"stage": stage, "created": time.strftime("%Y-%m-%dT%H:%M:%S"), "versions": versions()}
+    report.update(payload)
+    return write_json(Path(project) / "reports" / f"{stage}.json", report)
+
+
+def versions() -> dict[str, str]:
+    from gg_core import __version__
+
+    out = {"gg_core": __version__, "python": platform.python_version(), "numpy": np.__version__}
+    try:
+        import torch  # noqa: PLC0415 - optional here, always present in the project env
+
+        out["torch"] = torch.__version__
+    except ImportError:
+        pass
+    return out
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serializable: {type(obj).__name__}")

@@ -1,0 +1,46 @@
+"""Shared fixtures: small captures written in the product's capture layout."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from gg_core.capture.cameras import look_at, save_cameras
+from gg_core.geometry.meshio import write_ply
+
+
+def write_small_capture(root: Path, n_cams: int = 3, n_frames: int = 3, size: tuple[int, int] = (40, 30),
+                        sequences: tuple[str, ...] = ("seq0",)) -> Path:
+    """A tiny but complete capture: a ring of cameras around an octahedron 'body' moving up over time."""
+    rng = np.random.default_rng(0)
+    w, h = size
+    octa_v = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float) * 0.3
+    octa_f = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    for seq in sequences:
+        cams = {}
+        for i in range(n_cams):
+            a = 2 * np.pi * i / n_cams
+            eye = np.array([2.5 * np.sin(a), 1.0, 2.5 * np.cos(a)])
+            cams[f"cam{i:02d}"] = look_at(f"cam{i:02d}", eye, np.array([0, 1.0, 0]), 50, w, h, index=i)
+        save_cameras(root / seq / "cameras.json", cams)
+        for cid in cams:
+            for k in range(n_frames):
+                for kind in ("rgb_images", "garment_masks", "foreground_masks"):
+                    folder = root / seq / cid / kind
+                    folder.mkdir(parents=True, exist_ok=True)
+                    if kind == "rgb_images":
+                        img = rng.integers(0, 255, (h, w, 3), dtype=np.uint8)
+                    else:
+                        img = np.zeros((h, w), np.uint8)
+                        img[h // 3: 2 * h // 3, w // 3: 2 * w // 3] = 255
+                    Image.fromarray(img).save(folder / f"{k:06d}.png")
+        for k in range(n_frames):
+            write_ply(root / seq / "body" / f"{k:06d}.ply", octa_v + [0, 1.0 + 0.01 * k, 0], octa_f)
+    return root
+
+
+@pytest.fixture
+def small_capture(tmp_path: Path) -> Path:
+    return write_small_capture(tmp_path / "capture")
