@@ -15,7 +15,9 @@ from .errors import InputError
 
 # name -> module under gg_core.commands. Keep sorted by pipeline order.
 COMMANDS: dict[str, str] = {
+    "import": "import_capture",
     "inspect": "inspect",
+    "bench": "bench",
 }
 
 

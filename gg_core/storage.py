@@ -53,7 +53,7 @@ def write_report(project: str | os.PathLike, stage: str, payload: dict) -> Path:
 
 
 def versions() -> dict[str, str]:
-    from gg_core import __version__
+    from . import __version__
 
     out = {"gg_core": __version__, "python": platform.python_version(), "numpy": np.__version__}
     try:

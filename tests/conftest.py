@@ -44,3 +44,42 @@ def write_small_capture(root: Path, n_cams: int = 3, n_frames: int = 3, size: tu
 @pytest.fixture
 def small_capture(tmp_path: Path) -> Path:
     return write_small_capture(tmp_path / "capture")
+
+
+@pytest.fixture
+def capture_writer():
+    """write_small_capture itself, for tests that need other sizes or several sequences."""
+    return write_small_capture
+
+
+EXTENSION_ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def extension_package():
+    """The repository root imported as the extension package `gaussian_garments`, as Blender imports it.
+
+    The add-on's relative imports (`from ..gg_core ...`) need it; its bpy-free modules work without bpy.
+    """
+    import importlib.util
+    import sys
+
+    name = "gaussian_garments"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, EXTENSION_ROOT / "__init__.py",
+                                                      submodule_search_locations=[str(EXTENSION_ROOT)])
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+@pytest.fixture
+def blender(extension_package):
+    """bpy with an empty factory-settings scene and the add-on registered (unregistered afterwards)."""
+    import bpy
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    extension_package.register()
+    yield bpy
+    extension_package.unregister()

@@ -7,7 +7,9 @@ import importlib
 HELP = "benchmarks (JSON output): each compares the product's fast path with a baseline in the same run"
 
 # benchmark name -> module under gg_core.commands exposing HELP, configure(parser), run(args)
-BENCHES: dict[str, str] = {}
+BENCHES: dict[str, str] = {
+    "raster": "bench_raster",
+}
 
 
 def configure(parser: argparse.ArgumentParser) -> None:

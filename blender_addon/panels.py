@@ -1,0 +1,59 @@
+"""The "Garments" tab of the 3D View sidebar: capture and project, import, the running job.
+
+Later stages add their own sub-panels with bl_parent_id = GG_PT_garments.bl_idname.
+"""
+from __future__ import annotations
+
+import shlex
+
+import bpy
+from bpy.types import Context, Panel
+
+
+class GG_PT_garments(Panel):
+    bl_idname = "GG_PT_garments"
+    bl_label = "Gaussian Garments"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Garments"
+
+    def draw(self, context: Context) -> None:
+        settings = context.scene.gg
+        layout = self.layout
+        col = layout.column(align=True)
+        col.prop(settings, "capture_path")
+        col.prop(settings, "project_path")
+        row = layout.row(align=True)
+        op = row.operator("gg.import_capture", icon="IMPORT")
+        op.directory = settings.capture_path
+        inspect = row.operator("gg.run_job", text="Inspect", icon="VIEWZOOM")
+        inspect.stage = "inspect"
+        inspect.arguments = shlex.join([bpy.path.abspath(settings.capture_path)])
+        row.enabled = bool(settings.capture_path)
+        obj = context.active_object
+        if obj is not None and "gg_camera_id" in obj:
+            layout.operator("gg.use_capture_camera", icon="VIEW_CAMERA")
+
+
+class GG_PT_job(Panel):
+    bl_idname = "GG_PT_job"
+    bl_label = "Job"
+    bl_parent_id = GG_PT_garments.bl_idname
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Garments"
+
+    def draw(self, context: Context) -> None:
+        job = context.window_manager.gg_job
+        layout = self.layout
+        if job.running:
+            layout.progress(factor=job.progress, type="BAR", text=job.status)
+            layout.operator("gg.cancel_job", icon="CANCEL")
+        elif job.result:
+            layout.label(text=job.result, icon="ERROR" if job.failed else "CHECKMARK")
+        else:
+            layout.label(text="No job has run yet")
+
+
+CLASSES = (GG_PT_garments, GG_PT_job)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
