@@ -19,12 +19,14 @@ $(STAMP): requirements.txt pyproject.toml
 
 demo: $(STAMP)
 	$(BIN)/gg demo --out $(OUT)/demo
+	zip=$$($(BIN)/python tools/build_addon.py --out $(OUT)/addon) && \
+	$(BIN)/python tools/blender_batch.py --addon "$$zip" --capture $(OUT)/demo/capture --save $(OUT)/demo/blender/capture.blend --user-resources $(OUT)/blender_user
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -n 2 $(PYTEST_ARGS) tests
+	$(BIN)/python -m pytest -n 2 --dist loadgroup $(PYTEST_ARGS) tests
 
 test-core: $(STAMP)
-	$(BIN)/python -m pytest -n 2 -m "not bpy and not extension" $(PYTEST_ARGS) tests
+	$(BIN)/python -m pytest -n 2 --dist loadgroup -m "not bpy and not extension" $(PYTEST_ARGS) tests
 
 addon: $(STAMP)
 	$(BIN)/python tools/build_addon.py --out $(OUT)/addon

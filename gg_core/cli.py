@@ -15,6 +15,7 @@ from .errors import InputError
 
 # name -> module under gg_core.commands. Keep sorted by pipeline order.
 COMMANDS: dict[str, str] = {
+    "synth": "synth",
     "import": "import_capture",
     "inspect": "inspect",
     "bench": "bench",

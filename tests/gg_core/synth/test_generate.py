@@ -1,0 +1,41 @@
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from gg_core.capture.layout import Capture
+from gg_core.cli import main
+from gg_core.synth.quality import gt_frames
+
+from .conftest import generate_tiny
+
+# one tiny capture per xdist worker: with `--dist loadgroup` these share a single worker
+pytestmark = pytest.mark.xdist_group("synth_tiny")
+
+
+@pytest.mark.slow
+@pytest.mark.bpy
+def test_same_seed_same_truth_and_resume_skips_finished_work(tiny_capture, tmp_path):
+    out = tmp_path / "again"
+    generate_tiny(out, render=False)
+    for name, seq in Capture(tiny_capture).sequences.items():
+        np.testing.assert_array_equal(gt_frames(seq), gt_frames(Capture(out).sequence(name)))
+    # a finished capture: nothing simulated or rendered again
+    copy = tmp_path / "copy"
+    shutil.copytree(tiny_capture, copy)
+    removed = copy / "00_walk" / "cam03" / "rgb_images" / "000005.png"
+    removed.unlink()
+    report = json.loads(generate_tiny(copy, check=False).read_text())
+    walk = report["timings"]["sequences"]["00_walk"]
+    assert walk["resumed_simulation"] and walk["rendered_views"] == 1
+    assert report["timings"]["sequences"]["01_arm_swing"]["rendered_views"] == 0
+    assert removed.is_file()
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
+    assert main(["synth", "--out", str(tmp_path / "x"), "--effect", "wind", "--effect-param", "gust=3"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("gg: error:") and "\n" not in err
+    assert main(["synth", "--out", str(tmp_path / "x"), "--motions", "moonwalk"]) == 2
+    assert not (tmp_path / "x").exists()
