@@ -18,7 +18,10 @@ COMMANDS: dict[str, str] = {
     "synth": "synth",
     "import": "import_capture",
     "inspect": "inspect",
+    "behavior": "behavior",
+    "simulate": "simulate",
     "bench": "bench",
+    "demo": "demo",
 }
 
 

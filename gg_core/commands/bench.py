@@ -9,6 +9,7 @@ HELP = "benchmarks (JSON output): each compares the product's fast path with a b
 # benchmark name -> module under gg_core.commands exposing HELP, configure(parser), run(args)
 BENCHES: dict[str, str] = {
     "raster": "bench_raster",
+    "sim": "bench_sim",
 }
 
 

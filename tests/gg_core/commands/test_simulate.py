@@ -1,0 +1,60 @@
+"""`gg simulate`: a garment on a body-mesh folder and on a built-in motion; bad input gives one error line."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
+
+from physics_helpers import sheet, uv_sphere  # noqa: E402
+
+from gg_core.cli import main  # noqa: E402
+from gg_core.geometry.meshio import read_mesh, write_ply  # noqa: E402
+
+
+def test_simulate_on_body_folder(tmp_path):
+    bv, bf = uv_sphere(0.2, 16, 32)
+    for k in range(8):
+        write_ply(tmp_path / "body" / f"{k:04d}.ply", bv + [0.0, -0.005 * k, 0.0], bf)
+    v, f = sheet(10, 10, 0.6, 0.6, y=0.215)
+    write_ply(tmp_path / "garment.ply", v, f)
+    code = main(["simulate", "--garment", str(tmp_path / "garment.ply"), "--body", str(tmp_path / "body"),
+                 "--out", str(tmp_path / "out"), "--pin", "none", "--force", "air_drag:coef=0.8", "--progress", "none"])
+    assert code == 0
+    frames = sorted((tmp_path / "out").glob("*.ply"))
+    assert len(frames) == 8
+    last, faces = read_mesh(frames[-1])
+    np.testing.assert_array_equal(faces, f)
+    assert last[:, 1].min() < 0.1                                # draped over the sphere
+    report = json.loads((tmp_path / "out" / "simulate.json").read_text())
+    assert report["penetration"]["max_fraction_deeper"] <= 0.01
+    assert [t["name"] for t in report["terms"]][-1] == "air_drag"
+
+
+def test_simulate_skirt_on_motion(tmp_path):
+    from gg_core.body.model import load_body
+    from gg_core.synth.garments import tailor
+
+    garment = tailor(load_body(), "skirt", 300)
+    write_ply(tmp_path / "skirt.ply", garment.vertices, garment.faces)
+    code = main(["simulate", "--garment", str(tmp_path / "skirt.ply"), "--motion", "walk", "--frames", "4",
+                 "--settle", "2", "--out", str(tmp_path / "out"), "--progress", "none"])
+    assert code == 0
+    report = json.loads((tmp_path / "out" / "simulate.json").read_text())
+    assert report["frames"] == 6 and report["pinned_vertices"] > 0      # the waistband attaches itself
+    assert report["penetration"]["max_fraction_deeper"] <= 0.01
+
+
+def test_bad_input_is_one_error_line(tmp_path, capsys):
+    assert main(["simulate", "--garment", str(tmp_path / "missing.ply"), "--motion", "walk",
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("gg: error: mesh file not found")
+    v, f = sheet(2, 2, 0.1, 0.1)
+    write_ply(tmp_path / "g.ply", v, f)
+    assert main(["simulate", "--garment", str(tmp_path / "g.ply"), "--motion", "walk", "--out", str(tmp_path / "o"),
+                 "--force", "lift:coef=1"]) == 2
+    assert capsys.readouterr().err.startswith("gg: error: unknown force terms")

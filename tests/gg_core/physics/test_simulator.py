@@ -1,0 +1,70 @@
+"""The implicit simulator: free fall, a pinned sheet draping to rest, settling on a static body without
+penetration, recovery from a start inside the body."""
+from __future__ import annotations
+
+import numpy as np
+
+from gg_core.physics.cloth import GRAVITY, Cloth
+from gg_core.physics.contact import BodyCollider
+from gg_core.physics.simulator import ClothState, ImplicitSimulator
+
+from physics_helpers import sheet, uv_sphere
+
+
+def test_free_fall_matches_gravity():
+    """No forces but gravity: the discrete acceleration is g and positions follow implicit Euler exactly."""
+    v, f = sheet(6, 6, 0.3, 0.3, y=1.0)
+    sim = ImplicitSimulator(Cloth(v, f))
+    n = 20
+    traj = sim.rollout(ClothState(v.copy(), np.zeros_like(v)), None, n_frames=n + 1)
+    com = traj.mean(1)
+    accel = (com[2:] - 2 * com[1:-1] + com[:-2]) * sim.fps ** 2
+    np.testing.assert_allclose(accel, np.broadcast_to(GRAVITY, accel.shape), atol=1e-3)   # 1e-4 g
+    k = np.arange(n + 1)
+    expected = v.mean(0) + np.outer(k * (k + 1) / 2 / sim.fps ** 2, GRAVITY)
+    np.testing.assert_allclose(com, expected, atol=1e-6)
+    assert np.abs(traj[-1] - traj[-1].mean(0) - (v - v.mean(0))).max() < 1e-6   # falls rigidly
+
+
+def test_sheet_pinned_at_two_corners_drapes_and_comes_to_rest():
+    v, f = sheet(12, 12, 0.5, 0.5, y=1.0)
+    corners = [0, 12]                                     # the two corners of the first row
+    pinned = np.zeros(len(v), bool)
+    pinned[corners] = True
+    sim = ImplicitSimulator(Cloth(v, f, pinned=pinned))
+    traj = sim.rollout(ClothState(v.copy(), np.zeros_like(v)), None, n_frames=300)     # 10 s
+    assert np.isfinite(traj).all()
+    np.testing.assert_allclose(traj[:, corners], np.broadcast_to(v[corners], (300, 2, 3)))
+    speed = np.linalg.norm(np.diff(traj, axis=0), axis=2).max(1) * sim.fps
+    assert speed.max() > 2.0                             # it swung down...
+    assert speed[-30:].max() < 0.02 * speed.max()        # ...and has come to rest (pendulum damped out)
+    assert traj[-1][:, 1].min() < 1.0 - 0.35             # hangs down by most of its length
+    e = sim.cloth.topology.edges
+    strain = np.linalg.norm(traj[-1][e[:, 0]] - traj[-1][e[:, 1]], axis=1) / sim.cloth.rest_lengths.numpy() - 1
+    assert strain.max() < 0.25                           # stretched by its weight, not blown up
+
+
+def _sheet_on_sphere(start_y: float):
+    v, f = sheet(24, 24, 0.8, 0.8, y=start_y)
+    bv, bf = uv_sphere(0.25, 32, 64)
+    collider = BodyCollider(bf, len(bv))
+    sim = ImplicitSimulator(Cloth(v, f), collider=collider)
+    body = np.repeat(bv[None], 60, 0)
+    return sim, collider, body, sim.rollout(ClothState(v.copy(), np.zeros_like(v)), body)
+
+
+def test_garment_settles_on_static_body_without_penetration():
+    sim, collider, body, traj = _sheet_on_sphere(0.27)
+    depth = np.array([-collider.query(x, body[0], reach=0.1).distance.min() for x in traj])
+    assert depth.max() <= 2e-3
+    assert np.linalg.norm(traj[-1] - traj[-2], axis=1).max() * sim.fps < 0.1    # settling, not bouncing
+    assert traj[-1][:, 1].min() < 0.0                                           # draped over the sphere
+
+
+def test_garment_starting_inside_the_body_is_pushed_out():
+    sim, collider, body, traj = _sheet_on_sphere(0.245)   # the middle starts 5 mm inside the sphere
+    first = collider.query(traj[0], body[0], reach=0.1).distance
+    last = collider.query(traj[-1], body[0], reach=0.1).distance
+    assert first.min() < -4e-3
+    assert last.min() > -2e-3
+    assert np.isfinite(traj).all()
