@@ -5,6 +5,8 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 OUT ?= out
 PYTEST_ARGS ?=
+# tiny: ~1 min capture (6 cameras); demo: the 12-camera 256 px capture (~17 min to synthesize on 2 cores)
+DEMO_PRESET ?= tiny
 
 .PHONY: venv demo test test-core addon clean
 
@@ -18,7 +20,7 @@ $(STAMP): requirements.txt pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/gg demo --out $(OUT)/demo
+	$(BIN)/gg demo --preset $(DEMO_PRESET) --out $(OUT)/demo
 	zip=$$($(BIN)/python tools/build_addon.py --out $(OUT)/addon) && \
 	$(BIN)/python tools/blender_batch.py --addon "$$zip" --capture $(OUT)/demo/capture --save $(OUT)/demo/blender/capture.blend --user-resources $(OUT)/blender_user
 

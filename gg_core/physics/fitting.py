@@ -23,7 +23,7 @@ import torch
 from . import kernels
 from .cloth import Cloth
 from .material import MATERIAL_NAMES, MATERIAL_SPEC, Material, from_latent, to_latent
-from .simulator import ClothState, ImplicitSimulator
+from .simulator import ClothState, ImplicitSimulator, blend
 from .terms import StepInputs, System, Term
 
 
@@ -139,15 +139,10 @@ class TeacherForced:
     def _prepare(self, s: _Sample, k: int, x: np.ndarray, v: np.ndarray) -> StepInputs:
         """Inputs of substep k of a sample (body and pins interpolated linearly within the frame)."""
         n = self.sim.substeps
-        a0, a1 = k / n, (k + 1) / n
         b0 = b1 = None
         if s.body is not None:
-            b0, b1 = (1 - a0) * s.body + a0 * s.body_next, (1 - a1) * s.body + a1 * s.body_next
-            if k == 0:
-                b0 = s.body
-            if k == n - 1:
-                b1 = s.body_next
-        return self.sim.prepare(x, v, b0, b1, self.sim.dt, pin_target=(1 - a1) * s.x + a1 * s.target)
+            b0, b1 = blend(s.body, s.body_next, k / n), blend(s.body, s.body_next, (k + 1) / n)
+        return self.sim.prepare(x, v, b0, b1, self.sim.dt, pin_target=blend(s.x, s.target, (k + 1) / n))
 
     def _frame(self, s: _Sample) -> list[tuple[np.ndarray, StepInputs]]:
         """(end positions, inputs) of every substep of the sample's frame under the current parameters."""
@@ -155,10 +150,7 @@ class TeacherForced:
         x, v = s.x, s.v
         for k in range(sim.substeps):
             step = sim.with_contact_force(s.first) if k == 0 else self._prepare(s, k, x, v)
-            body_end = None
-            if s.body is not None:
-                a1 = (k + 1) / sim.substeps
-                body_end = s.body_next if k == sim.substeps - 1 else (1 - a1) * s.body + a1 * s.body_next
+            body_end = None if s.body is None else blend(s.body, s.body_next, (k + 1) / sim.substeps)
             y, step = sim.solve(step, body_end)
             out.append((y, step))
             v = (y - x) / sim.dt
