@@ -68,6 +68,12 @@ def test_behavior_fit_improves_heldout_rollouts(tmp_path):
     assert report["train_l2_fitted"] < report["train_l2_default"]
     with np.load(tmp_path / "project" / "stage4" / "behavior.npz") as z:
         assert z["mu"].shape == (49,) and z["attached"].sum() == report["attached_vertices"]
+    # resumable: unchanged inputs keep the result, a changed option reruns
+    path = tmp_path / "project" / "reports" / "behavior.json"
+    written = path.stat().st_mtime_ns
+    assert run_behavior(req) == path and path.stat().st_mtime_ns == written
+    req.fit.local_iterations = 0
+    assert "local" not in json.loads(run_behavior(req).read_text())["fit"]["stages"]
 
 
 def test_behavior_refuses_a_capture_without_registered_meshes(tmp_path):
