@@ -44,6 +44,8 @@ def run_blender_cloth(garment_rest: np.ndarray, garment_faces: np.ndarray, body_
 def _simulate(job: Path, out: Path) -> None:
     import bpy  # noqa: PLC0415 - worker process only
 
+    from ..synth.blender_scene import play_pc2  # noqa: PLC0415 - imports bpy
+
     z = np.load(job)
     settings = json.loads(str(z["settings"]))
     n_frames = len(z["body_frames"])
@@ -55,7 +57,7 @@ def _simulate(job: Path, out: Path) -> None:
 
     body = _mesh(scene, "body", z["body_frames"][0], z["body_faces"])
     write_pc2(work / "body.pc2", to_blender(z["body_frames"]))
-    _play(body, work / "body.pc2")
+    play_pc2(body, work / "body.pc2")
     body.modifiers.new("collision", "COLLISION")
     for key, value in settings["body_collision"].items():
         setattr(body.collision, key, value)
@@ -63,7 +65,7 @@ def _simulate(job: Path, out: Path) -> None:
     garment = _mesh(scene, "garment", z["garment_rest"], z["garment_faces"])
     targets = np.where(z["pinned"][None, :, None], z["pin_frames"], z["garment_rest"][None])
     write_pc2(work / "targets.pc2", to_blender(targets))
-    _play(garment, work / "targets.pc2")
+    play_pc2(garment, work / "targets.pc2")
     cloth = garment.modifiers.new("cloth", "CLOTH")
     for key, value in settings["cloth"].items():
         setattr(cloth.settings, key, value)
@@ -95,15 +97,6 @@ def _mesh(scene, name: str, verts: np.ndarray, faces: np.ndarray):
     obj = bpy.data.objects.new(name, mesh)
     scene.collection.objects.link(obj)
     return obj
-
-
-def _play(obj, pc2: Path) -> None:
-    """Mesh Cache modifier: scene frame f shows sample f - 1 of the PC2 file."""
-    mod = obj.modifiers.new("cache", "MESH_CACHE")
-    mod.cache_format = "PC2"
-    mod.filepath = str(pc2)
-    mod.frame_start = 1.0
-    mod.forward_axis, mod.up_axis = "POS_Y", "POS_Z"
 
 
 if __name__ == "__main__":

@@ -51,12 +51,12 @@ def build_scene(job: SequenceJob, arrays: dict[str, np.ndarray], workdir: Path) 
     body_pc2 = workdir / "body.pc2"
     write_pc2(body_pc2, to_blender(arrays["body_frames"]))
     body = _mesh_object(scene, "body", arrays["body_frames"][0], arrays["body_faces"])
-    _play(body, body_pc2)
+    play_pc2(body, body_pc2)
     body.pass_index = BODY_INDEX
     body.data.materials.append(plain_material("skin", SKIN, roughness=0.45, specular=0.5))
 
     collider = _mesh_object(scene, "body_collider", arrays["body_frames"][0], arrays["collider_faces"])
-    _play(collider, body_pc2)
+    play_pc2(collider, body_pc2)
     collider.hide_render = True
     collider.modifiers.new("collision", "COLLISION")
     _assign(collider.collision, job.body_collision)
@@ -68,7 +68,7 @@ def build_scene(job: SequenceJob, arrays: dict[str, np.ndarray], workdir: Path) 
             _vertex_group(garment, key[len(GROUP_PREFIX):], weights)
     targets_pc2 = workdir / "garment_targets.pc2"
     write_pc2(targets_pc2, to_blender(arrays["garment_targets"]))
-    _play(garment, targets_pc2)
+    play_pc2(garment, targets_pc2)
     garment.pass_index = GARMENT_INDEX
     garment.data.materials.append(fabric_material(Look(**job.look), job.uv_scale))
     _add_cloth(garment, job)
@@ -120,7 +120,7 @@ def _mesh_object(scene: bpy.types.Scene, name: str, verts: np.ndarray, faces: np
     return obj
 
 
-def _play(obj: bpy.types.Object, pc2: Path) -> None:
+def play_pc2(obj: bpy.types.Object, pc2: Path) -> None:
     """Mesh Cache modifier: scene frame f shows sample f - 1 of the PC2 file (already in Blender axes)."""
     mod = obj.modifiers.new("cache", "MESH_CACHE")
     mod.cache_format = "PC2"
