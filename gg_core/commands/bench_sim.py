@@ -46,8 +46,7 @@ def run(args: argparse.Namespace) -> int:
     verts, faces = garment.vertices, garment.faces
     pinned = garment.regions.get("pin", np.zeros(len(verts))) > 0
     pins = np.repeat(verts[None], len(frames), 0)
-    if pinned.any():
-        pins[:, pinned] = bind(body.rest_vertices.astype(np.float64), body.faces, verts[pinned]).apply(frames)
+    pins[:, pinned] = bind(body.rest_vertices.astype(np.float64), body.faces, verts[pinned]).apply(frames)
     collider = BodyCollider(body.faces, len(body.rest_vertices), exclude=body.hand_mask)
 
     sim = ImplicitSimulator(Cloth(verts, faces, pinned=pinned), collider=collider)

@@ -27,7 +27,9 @@ class Anchors:
 
 
 def bind(body_vertices: np.ndarray, body_faces: np.ndarray, points: np.ndarray) -> Anchors:
-    """Anchor `points` [N,3] to the body surface given in its rest pose."""
+    """Anchor `points` [N,3] to the body surface given in its rest pose (N may be 0: garments without pins)."""
+    if len(points) == 0:
+        return Anchors(np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
     foot, _, face = MeshProximity(body_vertices, body_faces).closest(points)
     tris = np.asarray(body_faces, np.int64)[face]
     tri = body_vertices[tris]
