@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import trimesh
 
 from gg_core.synth.anchoring import bind
 
@@ -14,10 +15,10 @@ def test_bind_with_no_points_applies_to_no_points() -> None:
 
 
 def test_anchored_points_follow_a_rigid_motion() -> None:
-    verts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
-    points = np.array([[0.2, 0.3, 0.05], [0.5, 0.1, -0.02]])
-    anchors = bind(verts, np.array([[0, 1, 2]]), points)
+    mesh = trimesh.creation.icosphere(2)
+    points = mesh.vertices[:20] * 1.05
+    anchors = bind(mesh.vertices, mesh.faces, points)
     c, s = np.cos(0.7), np.sin(0.7)
     rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
-    moved = anchors.apply(verts @ rot.T + [1, 2, 3])
+    moved = anchors.apply(mesh.vertices @ rot.T + [1, 2, 3])
     assert np.allclose(moved, points @ rot.T + [1, 2, 3], atol=1e-9)
