@@ -35,6 +35,29 @@ class GG_PT_garments(Panel):
             layout.operator("gg.use_capture_camera", icon="VIEW_CAMERA")
 
 
+class GG_PT_stages(Panel):
+    bl_idname = "GG_PT_stages"
+    bl_label = "Pipeline"
+    bl_parent_id = GG_PT_garments.bl_idname
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Garments"
+
+    def draw(self, context: Context) -> None:
+        settings = context.scene.gg
+        layout = self.layout
+        ready = bool(settings.capture_path and settings.project_path)
+        for run, load, icon in (("gg.reconstruct_template", "gg.load_template", "MESH_ICOSPHERE"),
+                                ("gg.register_sequences", "gg.load_registration", "ANIM"),
+                                ("gg.diagnose_physics", "gg.show_residuals", "FORCE_WIND")):
+            row = layout.row(align=True)
+            row.enabled = ready
+            row.operator(run, icon=icon)
+            row.operator(load, text="", icon="FILE_REFRESH")
+        if settings.diagnosis:
+            layout.label(text=settings.diagnosis, icon="INFO")
+
+
 class GG_PT_job(Panel):
     bl_idname = "GG_PT_job"
     bl_label = "Job"
@@ -55,5 +78,5 @@ class GG_PT_job(Panel):
             layout.label(text="No job has run yet")
 
 
-CLASSES = (GG_PT_garments, GG_PT_job)
+CLASSES = (GG_PT_garments, GG_PT_stages, GG_PT_job)
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -1,11 +1,12 @@
-"""bpy operators of the extension: import a capture, run / cancel a `gg` job, look through a capture camera."""
+"""bpy operators of the extension: import a capture, run / cancel a `gg` job, look through a capture camera,
+run the pipeline stages and load their results into the scene."""
 from __future__ import annotations
 
 
 def _classes() -> tuple:
-    from . import import_capture, run_job
+    from . import import_capture, results, run_job, stages
 
-    return (*run_job.CLASSES, *import_capture.CLASSES)
+    return (*run_job.CLASSES, *import_capture.CLASSES, *stages.CLASSES, *results.CLASSES)
 
 
 def register() -> None:

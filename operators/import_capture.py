@@ -22,13 +22,12 @@ from bpy.types import Context, Event, Object, Operator, Scene
 from mathutils import Matrix
 
 from ..blender_addon.convert import blender_camera, to_blender_points
+from ..blender_addon.meshes import add_mesh_cache, mesh_object
 from ..blender_addon.preferences import ADDON_PACKAGE
 from ..gg_core.capture.cameras import Camera
 from ..gg_core.capture.layout import Capture, Sequence
 from ..gg_core.errors import InputError
 from ..gg_core.geometry.meshio import read_mesh
-from ..gg_core.storage import atomic_path
-from ..gg_core.geometry.pc2 import write_pc2
 
 FPS = 30
 CAMERA_DISPLAY_SIZE = 0.2
@@ -213,27 +212,12 @@ def _read_body(seq: Sequence, frames: list[str]) -> tuple[np.ndarray, np.ndarray
 
 
 def _body_object(seq: Sequence, positions: np.ndarray, faces: np.ndarray, cache_dir: Path, frame_start: int) -> Object:
-    mesh = bpy.data.meshes.new(f"{seq.name}_body")
-    mesh.vertices.add(positions.shape[1])
-    mesh.vertices.foreach_set("co", positions[0].astype(np.float32).ravel())
-    mesh.loops.add(faces.size)
-    mesh.loops.foreach_set("vertex_index", faces.astype(np.int32).ravel())
-    mesh.polygons.add(len(faces))
-    mesh.polygons.foreach_set("loop_start", np.arange(0, faces.size, 3, dtype=np.int32))
-    mesh.update()
-    mesh.shade_smooth()
-    obj = bpy.data.objects.new(f"{seq.name}_body", mesh)
+    obj = mesh_object(f"{seq.name}_body", positions[0], faces)
     obj["gg_sequence"] = seq.name
     obj["gg_capture"] = str(seq.root.parent)
     if len(positions) > 1:
         key = hashlib.sha1(str(seq.root.resolve()).encode()).hexdigest()[:10]
-        cache = cache_dir / f"{seq.name}_body_{key}.pc2"
-        with atomic_path(cache) as tmp:
-            write_pc2(tmp, positions)
-        modifier = obj.modifiers.new("Body Motion", "MESH_CACHE")
-        modifier.cache_format = "PC2"
-        modifier.filepath = str(cache)
-        modifier.frame_start = frame_start
+        add_mesh_cache(obj, positions, cache_dir / f"{seq.name}_body_{key}.pc2", frame_start, "Body Motion")
     return obj
 
 

@@ -1,6 +1,7 @@
 """Run one `gg` stage as a job: progress, ETA and Cancel in the panel; synchronous in background mode.
 
-Other operators reuse it: bpy.ops.gg.run_job(stage="register", arguments=shlex.join([...])).
+Other operators reuse it: bpy.ops.gg.run_job(stage="register", arguments=shlex.join([...]), then="load_registration")
+runs the stage, then the operator that brings its results into the scene.
 In the UI the job is followed by a modal operator woken by a timer; with `blender --background` timers and
 modal handlers never fire, so the same job runs to its end inside execute().
 """
@@ -27,6 +28,8 @@ class GG_OT_run_job(Operator):
 
     stage: StringProperty(name="Stage", description="gg command to run (e.g. inspect, template, register)")
     arguments: StringProperty(name="Arguments", description="Command-line arguments after the stage, shell-quoted")
+    then: StringProperty(name="Then", description="gg operator to run after the job succeeds (e.g. load_template) "
+                                                  "to show its results in the scene")
 
     def execute(self, context: Context) -> set[str]:
         previous = jobs.current()
@@ -88,6 +91,8 @@ class GG_OT_run_job(Operator):
             state.result = f"gg {self.stage}: done" + (f", report {job.state.report}" if job.state.report else "")
             state.failed = False
             self.report({"INFO"}, state.result)
+            if self.then:
+                getattr(bpy.ops.gg, self.then)()
             return {"FINISHED"}
         if result.cancelled:
             state.result, state.failed = f"gg {self.stage}: cancelled", True

@@ -81,3 +81,14 @@ def test_job_panel_states(blender, extension_package):
     assert log[0] == ("progress", 0.25, "inspect 1/4 · seqA · ETA 3 s") and log[1][1] == "gg.cancel_job"
     job.running, job.failed, job.result = False, True, "gg: error: capture folder not found, /x, fix"
     assert draw(blender, panels.GG_PT_job) == [("label", "gg: error: capture folder not found, /x, fix")]
+
+
+def test_pipeline_panel_offers_each_stage_and_its_loader(blender, extension_package):
+    panels = importlib.import_module(f"{extension_package.__name__}.blender_addon.panels")
+    log = draw(blender, panels.GG_PT_stages)
+    ops = [entry[1] for entry in log if entry[0] == "operator"]
+    assert ops == ["gg.reconstruct_template", "gg.load_template", "gg.register_sequences", "gg.load_registration",
+                   "gg.diagnose_physics", "gg.show_residuals"]
+    assert not any(entry[0] == "label" for entry in log)
+    blender.context.scene.gg.diagnosis = "Missing physics: air_drag (+42% held-out)"
+    assert draw(blender, panels.GG_PT_stages)[-1] == ("label", "Missing physics: air_drag (+42% held-out)")

@@ -13,21 +13,7 @@ from gg_core.geometry.meshio import read_mesh, write_ply
 pytestmark = pytest.mark.bpy
 
 
-def z_up(points: np.ndarray) -> np.ndarray:
-    return np.stack([points[:, 0], -points[:, 2], points[:, 1]], axis=1)
-
-
-def evaluated_vertices(bpy, obj) -> np.ndarray:
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    evaluated = obj.evaluated_get(depsgraph)
-    mesh = evaluated.to_mesh()
-    co = np.empty(len(mesh.vertices) * 3, np.float32)
-    mesh.vertices.foreach_get("co", co)
-    evaluated.to_mesh_clear()
-    return co.reshape(-1, 3)
-
-
-def test_camera_round_trip_within_half_a_pixel(blender, small_capture):
+def test_camera_round_trip_within_half_a_pixel(blender, small_capture, z_up):
     """Points projected with cameras.json land where the imported Blender camera sees them."""
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Vector
@@ -65,7 +51,7 @@ def test_camera_round_trip_within_half_a_pixel(blender, small_capture):
         np.testing.assert_allclose(ndc[:, 2], depth, rtol=1e-5)
 
 
-def test_import_builds_one_collection_per_sequence(blender, capture_writer, tmp_path):
+def test_import_builds_one_collection_per_sequence(blender, capture_writer, tmp_path, z_up, evaluated_vertices):
     bpy = blender
     capture = capture_writer(tmp_path / "capture", n_cams=2, n_frames=4, sequences=("seqA", "seqB"))
     project = tmp_path / "project"
@@ -87,7 +73,7 @@ def test_import_builds_one_collection_per_sequence(blender, capture_writer, tmp_
         for k in range(4):
             scene.frame_set(scene.frame_start + k)
             verts, _ = read_mesh(capture / seq / "body" / f"{k:06d}.ply")
-            np.testing.assert_allclose(evaluated_vertices(bpy, body), z_up(verts), atol=1e-6)
+            np.testing.assert_allclose(evaluated_vertices(body), z_up(verts), atol=1e-6)
             cam = next(o for o in coll.objects if o.type == "CAMERA")
             background = cam.data.background_images[0]
             shown = background.image.filepath_from_user(image_user=background.image_user)

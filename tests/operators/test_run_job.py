@@ -58,7 +58,7 @@ def test_modal_path_follows_progress_and_cancels(blender, extension_package):
 
     class StandIn:  # the attributes and methods Blender's operator instance would carry
         modal, _show, _finish, _fail = op_cls.modal, op_cls._show, op_cls._finish, op_cls._fail
-        stage = "demo"
+        stage, then = "demo", ""
 
         def __init__(self):
             self.reports = []

@@ -1,0 +1,181 @@
+"""Bring stage results into the scene: the stage-1 template, registered sequences, the residual heat map.
+
+Each loader reads the project folder the stages wrote (layout in gg_core.stages; no torch here) and replaces
+what an earlier load of the same result created, so re-running a stage and loading again never piles up
+duplicates. Registered sequences are animated like the imported body: one mesh + a PC2 Mesh Cache.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import bpy
+import numpy as np
+from bpy.types import Collection, Context, Object, Operator, Scene
+
+from ..blender_addon.colormap import heat_colors
+from ..blender_addon.convert import to_blender_points
+from ..blender_addon.meshes import add_mesh_cache, mesh_object, vertex_colors
+from ..gg_core.errors import InputError
+from ..gg_core.geometry.meshio import read_mesh, read_obj
+
+RESULTS_COLLECTION = "Gaussian Garments"
+
+
+def project_dir(scene: Scene) -> Path:
+    """The scene's project folder; InputError when it is not set or missing."""
+    if not scene.gg.project_path:
+        raise InputError("no project folder set", "Garments panel > Project", "choose the folder the stages write to")
+    path = Path(bpy.path.abspath(scene.gg.project_path))
+    if not path.is_dir():
+        raise InputError("project folder not found", path, "run a stage first or choose another folder")
+    return path
+
+
+def _required(path: Path, how: str) -> Path:
+    if not path.is_file():
+        raise InputError(f"{path.name} not found", path, how)
+    return path
+
+
+def _replace_object(obj: Object, collection: Collection) -> Object:
+    """Link `obj` into `collection`, removing an earlier object of the same result (same gg_result tag)."""
+    for old in [o for o in collection.objects if o.get("gg_result") == obj["gg_result"]]:
+        bpy.data.objects.remove(old, do_unlink=True)
+    collection.objects.link(obj)
+    obj.name = obj["gg_result"]
+    return obj
+
+
+def _results_collection(scene: Scene, name: str = RESULTS_COLLECTION) -> Collection:
+    collection = bpy.data.collections.get(name)
+    if collection is None:
+        collection = bpy.data.collections.new(name)
+    if collection.name not in scene.collection.children:
+        scene.collection.children.link(collection)
+    return collection
+
+
+class _Loader(Operator):
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context: Context) -> set[str]:
+        try:
+            message = self.load(context.scene, project_dir(context.scene))
+        except InputError as exc:
+            self.report({"ERROR"}, exc.line())
+            return {"CANCELLED"}
+        self.report({"INFO"}, message)
+        return {"FINISHED"}
+
+    def load(self, scene: Scene, project: Path) -> str:
+        raise NotImplementedError
+
+
+class GG_OT_load_template(_Loader):
+    """Show the stage-1 template mesh (with its UV atlas) of the project"""
+
+    bl_idname = "gg.load_template"
+    bl_label = "Load Template"
+
+    def load(self, scene: Scene, project: Path) -> str:
+        path = _required(project / "stage1" / "template.obj", "run Reconstruct Template first")
+        verts, faces, uvs, face_uvs = read_obj(path)
+        obj = mesh_object("garment_template", to_blender_points(verts), faces, uvs, face_uvs)
+        obj["gg_result"] = "garment_template"
+        _replace_object(obj, _results_collection(scene))
+        return f"template: {len(verts)} vertices, {len(faces)} faces"
+
+
+class GG_OT_load_registration(_Loader):
+    """Show every registered sequence as an animated garment mesh (Mesh Cache), next to its capture sequence"""
+
+    bl_idname = "gg.load_registration"
+    bl_label = "Load Registration"
+
+    def load(self, scene: Scene, project: Path) -> str:
+        folders = sorted(p for p in (project / "stage2").glob("*/meshes") if any(p.glob("*.ply")))
+        if not folders:
+            raise InputError("no registered frames", project / "stage2", "run Register Sequences first")
+        loaded = [self._sequence(scene, folder.parent.name, sorted(folder.glob("*.ply")), project) for folder in folders]
+        return f"registered garment: {len(loaded)} sequence(s), {sum(loaded)} frames"
+
+    @staticmethod
+    def _sequence(scene: Scene, name: str, files: list[Path], project: Path) -> int:
+        frames, faces0 = [], None
+        for path in files:
+            verts, faces = read_mesh(path)
+            if faces0 is None:
+                faces0 = faces
+            elif not np.array_equal(faces, faces0):
+                raise InputError("registered meshes change topology", path, f"run Register Sequences again for {name}")
+            frames.append(to_blender_points(verts))
+        positions = np.stack(frames)
+        # Place the animation on the capture's timeline: the imported sequence keeps its frame names.
+        collection = next((c for c in bpy.data.collections if c.get("gg_sequence") == name), None)
+        names = list(collection["gg_frames"]) if collection is not None and "gg_frames" in collection else []
+        first = files[0].stem
+        frame_start = scene.frame_start + (names.index(first) if first in names else 0)
+        obj = mesh_object(f"{name}_garment", positions[0], faces0)
+        obj["gg_result"] = f"{name}_garment"
+        obj["gg_sequence"] = name
+        if len(positions) > 1:
+            add_mesh_cache(obj, positions, project / "blender" / f"{name}_garment.pc2", frame_start, "Registered Motion")
+        _replace_object(obj, collection if collection is not None else _results_collection(scene))
+        return len(files)
+
+
+class GG_OT_show_residuals(_Loader):
+    """Colour the garment by the diagnosis' residual force map and show the verdict in the panel"""
+
+    bl_idname = "gg.show_residuals"
+    bl_label = "Show Residual Map"
+
+    def load(self, scene: Scene, project: Path) -> str:
+        report_path = _required(project / "reports" / "diagnose.json", "run Diagnose Physics first")
+        try:
+            report = json.loads(report_path.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise InputError(f"diagnosis report cannot be read ({exc.__class__.__name__})", report_path,
+                             "run Diagnose Physics again") from None
+        verts, faces = read_mesh(_required(project / "diagnose" / "template.ply", "run Diagnose Physics again"))
+        residual = np.load(_required(project / "diagnose" / "residual_vertex.npy", "run Diagnose Physics again"))
+        if residual.shape != (len(verts),):
+            raise InputError(f"residual map has {residual.shape} values for {len(verts)} vertices",
+                             project / "diagnose", "run Diagnose Physics again")
+        colors, vmax = heat_colors(residual)
+        obj = mesh_object("diagnosis_residual", to_blender_points(verts), faces)
+        obj["gg_result"] = "diagnosis_residual"
+        obj["gg_residual_max"] = vmax
+        vertex_colors(obj, colors, "residual")
+        obj.data.materials.append(_attribute_material("residual"))
+        _replace_object(obj, _results_collection(scene))
+        scene.gg.diagnosis = summary(report)
+        return scene.gg.diagnosis
+
+
+def summary(report: dict) -> str:
+    """One line for the panel: the verdict and the accepted effects with their held-out gain."""
+    if report.get("verdict") != "missing":
+        return "Nothing missing: the simulator explains the recordings"
+    gains = {e["name"]: e.get("heldout_gain") for e in report.get("effects", [])}
+    accepted = ", ".join(f"{name} ({gains[name]:+.0%} held-out)" if gains.get(name) is not None else name
+                         for name in report.get("accepted", []))
+    return f"Missing physics: {accepted}"
+
+
+def _attribute_material(attribute: str) -> bpy.types.Material:
+    """A material that renders the colour attribute, so the heat map shows in Material/Rendered view too."""
+    material = bpy.data.materials.get("gg_residual") or bpy.data.materials.new("gg_residual")
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    nodes.clear()
+    color = nodes.new("ShaderNodeVertexColor")
+    color.layer_name = attribute
+    emission = nodes.new("ShaderNodeEmission")
+    output = nodes.new("ShaderNodeOutputMaterial")
+    links.new(color.outputs["Color"], emission.inputs["Color"])
+    links.new(emission.outputs["Emission"], output.inputs["Surface"])
+    return material
+
+
+CLASSES = (GG_OT_load_template, GG_OT_load_registration, GG_OT_show_residuals)

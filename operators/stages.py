@@ -1,0 +1,65 @@
+"""Panel buttons for the pipeline stages: each runs its `gg` command as a job on the scene's capture and
+project folders, then loads the result into the scene (gg.run_job's `then`)."""
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+
+import bpy
+from bpy.types import Context, Operator
+
+from ..gg_core.errors import InputError
+
+
+def stage_arguments(context: Context) -> list[str]:
+    """`<capture> --project <project>` from the panel's folders; InputError when one is missing."""
+    settings = context.scene.gg
+    if not settings.capture_path:
+        raise InputError("no capture folder set", "Garments panel > Capture", "choose the capture folder")
+    if not settings.project_path:
+        raise InputError("no project folder set", "Garments panel > Project", "choose a folder for the results")
+    capture = Path(bpy.path.abspath(settings.capture_path))
+    project = Path(bpy.path.abspath(settings.project_path))
+    return [str(capture), "--project", str(project)]
+
+
+class _StageJob(Operator):
+    stage = ""
+    then = ""
+
+    def execute(self, context: Context) -> set[str]:
+        try:
+            arguments = stage_arguments(context)
+        except InputError as exc:
+            self.report({"ERROR"}, exc.line())
+            return {"CANCELLED"}
+        return bpy.ops.gg.run_job(stage=self.stage, arguments=shlex.join(arguments), then=self.then)
+
+
+class GG_OT_reconstruct_template(_StageJob):
+    """Stage 1: template mesh with a UV atlas and initial Gaussians from one multi-view frame"""
+
+    bl_idname = "gg.reconstruct_template"
+    bl_label = "Reconstruct Template"
+    stage, then = "template", "load_template"
+
+
+class GG_OT_register_sequences(_StageJob):
+    """Stage 2: fit the template to every frame of every sequence (runs in the background; Cancel keeps
+    finished frames)"""
+
+    bl_idname = "gg.register_sequences"
+    bl_label = "Register Sequences"
+    stage, then = "register", "load_registration"
+
+
+class GG_OT_diagnose_physics(_StageJob):
+    """Find where and when simulation and recording differ, name the missing physics, refit, and colour the
+    garment by the residual"""
+
+    bl_idname = "gg.diagnose_physics"
+    bl_label = "Diagnose Physics"
+    stage, then = "diagnose", "show_residuals"
+
+
+CLASSES = (GG_OT_reconstruct_template, GG_OT_register_sequences, GG_OT_diagnose_physics)

@@ -1,0 +1,111 @@
+"""Loading stage results into the scene: template with UVs, registered sequences as Mesh Cache animation,
+residual heat map with the verdict; stage buttons refuse to run without folders."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gg_core.geometry.meshio import write_obj, write_ply
+
+pytestmark = pytest.mark.bpy
+
+QUAD = np.array([[0.0, 1.0, 0.0], [0.2, 1.0, 0.0], [0.2, 1.2, 0.1], [0.0, 1.2, 0.1]])
+TRIS = np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def test_template_loads_with_its_uv_atlas(blender, tmp_path, z_up):
+    uvs = np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9]])
+    (tmp_path / "stage1").mkdir()
+    write_obj(tmp_path / "stage1" / "template.obj", QUAD, TRIS, uvs, TRIS)
+    blender.context.scene.gg.project_path = str(tmp_path)
+    for _ in range(2):  # loading again replaces, never duplicates
+        assert blender.ops.gg.load_template() == {"FINISHED"}
+    objs = [o for o in blender.data.objects if o.get("gg_result") == "garment_template"]
+    assert len(objs) == 1
+    mesh = objs[0].data
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    np.testing.assert_allclose(co.reshape(-1, 3), z_up(QUAD), atol=1e-6)
+    loop_uv = np.empty(len(mesh.loops) * 2, np.float32)
+    mesh.uv_layers["UVMap"].data.foreach_get("uv", loop_uv)
+    np.testing.assert_allclose(loop_uv.reshape(-1, 2), uvs[TRIS.ravel()], atol=1e-6)
+
+
+def test_registration_plays_back_every_frame_on_the_capture_timeline(blender, capture_writer, tmp_path, z_up,
+                                                                      evaluated_vertices):
+    bpy = blender
+    capture = capture_writer(tmp_path / "capture", n_cams=1, n_frames=4, sequences=("seqA",))
+    project = tmp_path / "project"
+    bpy.context.scene.gg.project_path = str(project)
+    assert bpy.ops.gg.import_capture(directory=str(capture)) == {"FINISHED"}
+    frames = {f"{k:06d}": QUAD + [0.0, 0.0, 0.05 * k] for k in (1, 2, 3)}  # frame 0 not registered (yet)
+    for name, verts in frames.items():
+        (project / "stage2" / "seqA" / "meshes").mkdir(parents=True, exist_ok=True)
+        write_ply(project / "stage2" / "seqA" / "meshes" / f"{name}.ply", verts, TRIS)
+    assert bpy.ops.gg.load_registration() == {"FINISHED"}
+    garment = bpy.data.objects["seqA_garment"]
+    assert garment.users_collection[0].name == "seqA"
+    scene = bpy.context.scene
+    for k, (name, verts) in enumerate(frames.items(), start=1):
+        scene.frame_set(scene.frame_start + k)
+        np.testing.assert_allclose(evaluated_vertices(garment), z_up(verts), atol=1e-6)
+
+
+def test_registration_with_changing_topology_is_refused(blender, tmp_path):
+    meshes = tmp_path / "stage2" / "seqA" / "meshes"
+    meshes.mkdir(parents=True)
+    write_ply(meshes / "000000.ply", QUAD, TRIS)
+    write_ply(meshes / "000001.ply", QUAD, TRIS[::-1])
+    blender.context.scene.gg.project_path = str(tmp_path)
+    with pytest.raises(RuntimeError, match=r"gg: error: registered meshes change topology, .*000001\.ply"):
+        blender.ops.gg.load_registration()
+
+
+def _write_diagnosis(project: Path, report: dict, residual: np.ndarray) -> None:
+    (project / "reports").mkdir(parents=True)
+    (project / "diagnose").mkdir()
+    (project / "reports" / "diagnose.json").write_text(json.dumps(report))
+    write_ply(project / "diagnose" / "template.ply", QUAD, TRIS)
+    np.save(project / "diagnose" / "residual_vertex.npy", residual)
+
+
+def test_residual_map_colours_the_garment_and_states_the_verdict(blender, tmp_path):
+    report = {"verdict": "missing", "accepted": ["air_drag"],
+              "effects": [{"name": "air_drag", "heldout_gain": 0.42}, {"name": "wind", "heldout_gain": 0.05}]}
+    _write_diagnosis(tmp_path, report, np.array([0.0, 1.0, 2.0, 4.0]))
+    blender.context.scene.gg.project_path = str(tmp_path)
+    assert blender.ops.gg.show_residuals() == {"FINISHED"}
+    obj = blender.data.objects["diagnosis_residual"]
+    colors = np.empty(4 * 4, np.float32)
+    obj.data.color_attributes["residual"].data.foreach_get("color", colors)
+    colors = colors.reshape(4, 4)
+    assert not np.allclose(colors[0], colors[3])  # low and high residual differ
+    assert blender.context.scene.gg.diagnosis == "Missing physics: air_drag (+42% held-out)"
+
+
+def test_residual_map_of_wrong_length_is_refused(blender, tmp_path):
+    _write_diagnosis(tmp_path, {"verdict": "none"}, np.zeros(3))
+    blender.context.scene.gg.project_path = str(tmp_path)
+    with pytest.raises(RuntimeError, match=r"gg: error: residual map has \(3,\) values for 4 vertices"):
+        blender.ops.gg.show_residuals()
+
+
+def test_nothing_missing_is_said_plainly(blender, tmp_path):
+    _write_diagnosis(tmp_path, {"verdict": "none", "accepted": []}, np.zeros(4))
+    blender.context.scene.gg.project_path = str(tmp_path)
+    assert blender.ops.gg.show_residuals() == {"FINISHED"}
+    assert blender.context.scene.gg.diagnosis.startswith("Nothing missing")
+
+
+@pytest.mark.parametrize("operator", ["reconstruct_template", "register_sequences", "diagnose_physics"])
+def test_stage_buttons_need_both_folders(blender, operator):
+    with pytest.raises(RuntimeError, match=r"gg: error: no capture folder set, Garments panel > Capture"):
+        getattr(blender.ops.gg, operator)()
+
+
+def test_load_without_project_is_one_error_line(blender):
+    with pytest.raises(RuntimeError, match=r"gg: error: no project folder set"):
+        blender.ops.gg.load_template()
