@@ -30,6 +30,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="override an effect parameter (repeatable), e.g. strength=40 or region=hem")
     parser.add_argument("--texture", choices=list(PATTERNS), default="print",
                         help="fabric pattern: print, weave, or fuzzy (fur-like fibres with sheen)")
+    parser.add_argument("--sequences", type=int, metavar="N",
+                        help="number of sequences (default: the preset's); e.g. 1 to time a large preset quickly")
+    parser.add_argument("--frames", type=int, metavar="N", help="recorded frames per sequence (default: the preset's)")
     parser.add_argument("--no-render", action="store_true",
                         help="simulate and write ground truth only (no images; the capture is then incomplete)")
     parser.add_argument("--no-check", action="store_true", help="skip the quality checks in the report")
@@ -38,9 +41,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..synth.generate import SynthRequest, generate
-    from ..synth.presets import get_preset
+    from ..synth.presets import get_preset, resized
 
-    req = SynthRequest(preset=get_preset(args.preset), out=args.out, seed=args.seed, garment=args.garment,
+    preset = resized(get_preset(args.preset), args.sequences, args.frames)
+    req = SynthRequest(preset=preset, out=args.out, seed=args.seed, garment=args.garment,
                        motions=args.motions, effect=args.effect, effect_params=args.effect_param,
                        texture=args.texture, render=not args.no_render, check=not args.no_check,
                        progress=args.progress)

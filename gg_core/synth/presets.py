@@ -6,7 +6,7 @@ per view than 10 samples), `bench` is large enough for timing measurements.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 from ..errors import InputError
 
@@ -60,3 +60,11 @@ def get_preset(name: str) -> Preset:
     if name not in PRESETS:
         raise InputError(f"unknown preset '{name}'", "--preset", f"choose one of: {', '.join(PRESETS)}")
     return PRESETS[name]
+
+
+def resized(preset: Preset, n_sequences: int | None = None, n_frames: int | None = None) -> Preset:
+    """`preset` with fewer or more sequences / frames (cameras, pixels and quality unchanged)."""
+    for value, option in ((n_sequences, "--sequences"), (n_frames, "--frames")):
+        if value is not None and value < 1:
+            raise InputError(f"{option} must be at least 1, got {value}", option, "pass a positive count")
+    return replace(preset, n_sequences=n_sequences or preset.n_sequences, n_frames=n_frames or preset.n_frames)
