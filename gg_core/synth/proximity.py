@@ -39,7 +39,7 @@ class MeshProximity:
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(closest points [N,3], distances [N], face index [N]) for query points [N,3]."""
         points = np.asarray(points, np.float64)
-        _, near = self._tree.query(points, k=self.k)
+        _, near = self._tree.query(points, k=min(self.k, len(self.vertices)))  # small meshes: k <= V
         cand = self._vertex_faces[near].reshape(len(points), -1)              # [N, k * max degree]
         tri = self.vertices[self.faces[cand.ravel()]]
         q = np.repeat(points, cand.shape[1], axis=0)

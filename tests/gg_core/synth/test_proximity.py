@@ -36,3 +36,10 @@ def test_anchors_reproduce_rest_and_follow_a_rigid_motion():
     rot = trimesh.transformations.rotation_matrix(0.7, [0.3, 1, 0])[:3, :3]
     moved = anchors.apply(np.stack([sphere.vertices @ rot.T + [0, 1, 0]]))[0]
     np.testing.assert_allclose(moved, pts @ rot.T + [0, 1, 0], atol=1e-9)
+
+
+def test_mesh_smaller_than_k_neighbours():
+    """A single triangle has fewer vertices than the k nearest-vertex candidates asked for."""
+    tri = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    prox = MeshProximity(tri, np.array([[0, 1, 2]]))
+    np.testing.assert_allclose(prox.signed_distance(np.array([[0.2, 0.2, 0.5], [0.2, 0.2, -0.3]])), [0.5, -0.3])
