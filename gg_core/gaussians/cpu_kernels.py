@@ -105,17 +105,20 @@ def _box(packed, j, x0, x1, y0, y1, half):
     return lo_x, hi_x, lo_y, hi_y
 
 
+@njit(inline="always")
+def _tile(t, offsets, tile, width, height):
+    """Sorted-pair range and pixel bounds [x0, x1) x [y0, y1) of tile t (row-major tiles)."""
+    ntx = (width + tile - 1) // tile
+    x0, y0 = (t % ntx) * tile, (t // ntx) * tile
+    return offsets[t], offsets[t + 1], x0, min(x0 + tile, width), y0, min(y0 + tile, height)
+
+
 @njit(parallel=True, cache=True)
 def forward(packed, offsets, order, xs, ys, tile, background, consts, image, alpha, depth, t_final, n_used):
     """Front-to-back compositing; image/depth/n_used must come zeroed and t_final filled with ones."""
     half, amax, tmin, one, two = consts[0], consts[1], consts[2], consts[3], consts[4]
-    width, height = xs.shape[0], ys.shape[0]
-    ntx = (width + tile - 1) // tile
     for k in prange(order.shape[0]):
-        t = order[k]
-        start, end = offsets[t], offsets[t + 1]
-        x0, y0 = (t % ntx) * tile, (t // ntx) * tile
-        x1, y1 = min(x0 + tile, width), min(y0 + tile, height)
+        start, end, x0, x1, y0, y1 = _tile(order[k], offsets, tile, xs.shape[0], ys.shape[0])
         done = np.zeros((y1 - y0, x1 - x0), np.bool_)
         n_done, n_pix = 0, (y1 - y0) * (x1 - x0)
         for j in range(start, end):
@@ -161,13 +164,8 @@ def backward(packed, offsets, order, xs, ys, tile, background, consts, t_final, 
              g_image, g_alpha, g_depth, pair_grads):
     """Back-to-front pass; writes d loss / d (mean2d, conic, opacity, depth, colour) of every pair."""
     half, amax, one, two, zero = consts[0], consts[1], consts[3], consts[4], consts[5]
-    width, height = xs.shape[0], ys.shape[0]
-    ntx = (width + tile - 1) // tile
     for k in prange(order.shape[0]):
-        t = order[k]
-        start, end = offsets[t], offsets[t + 1]
-        x0, y0 = (t % ntx) * tile, (t // ntx) * tile
-        x1, y1 = min(x0 + tile, width), min(y0 + tile, height)
+        start, end, x0, x1, y0, y1 = _tile(order[k], offsets, tile, xs.shape[0], ys.shape[0])
         # per pixel: transmittance in front of the current Gaussian, then the colour, alpha and depth of
         # everything behind it as seen through it (starting from the background)
         state = np.empty((y1 - y0, x1 - x0, 6), t_final.dtype)
