@@ -1,6 +1,7 @@
-"""Shared fixtures: small captures written in the product's capture layout."""
+"""Shared fixtures: small captures written in the product's capture layout, and the synthetic tiny preset."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +10,8 @@ from PIL import Image
 
 from gg_core.capture.cameras import look_at, save_cameras
 from gg_core.geometry.meshio import write_ply
+from gg_core.synth.generate import SynthRequest, generate
+from gg_core.synth.presets import get_preset
 
 
 def write_small_capture(root: Path, n_cams: int = 3, n_frames: int = 3, size: tuple[int, int] = (40, 30),
@@ -50,6 +53,30 @@ def small_capture(tmp_path: Path) -> Path:
 def capture_writer():
     """write_small_capture itself, for tests that need other sizes or several sequences."""
     return write_small_capture
+
+
+def generate_tiny(root: Path, **options: object) -> Path:
+    """Generate the tiny preset under `root` (skirt, seed 0, effect none unless overridden); return the report.
+
+    Blender cloth + Cycles, about a minute: stage tests share one capture through `tiny_capture`.
+    """
+    return generate(SynthRequest(preset=get_preset("tiny"), out=root, progress="none", **options))
+
+
+@pytest.fixture(scope="session")
+def tiny_capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The tiny synthetic capture (6 cameras 72x96, 2 sequences x 8 frames, skirt), generated once per test run
+    and shared by the xdist workers (the first one generates under a lock; tests only read it)."""
+    from filelock import FileLock
+
+    shared = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        shared = shared.parent  # common to all workers of this run
+    root = shared / "tiny_capture"
+    with FileLock(str(root) + ".lock"):
+        if not (root / "reports" / "synth.json").is_file():
+            generate_tiny(root)
+    return root
 
 
 EXTENSION_ROOT = Path(__file__).resolve().parents[1]

@@ -10,7 +10,7 @@ from gg_core.synth.quality import gt_frames
 
 from .conftest import generate_tiny
 
-# one tiny capture per xdist worker: with `--dist loadgroup` these share a single worker
+# the slow generator tests run on one worker so the other keeps the stage tests going
 pytestmark = pytest.mark.xdist_group("synth_tiny")
 
 

@@ -11,7 +11,7 @@ from gg_core.cli import main
 from gg_core.synth.quality import (body_frames, gt_frames, mean_displacement, penetration,
                                    projection_consistency, trajectory_difference)
 
-# one tiny capture per xdist worker: with `--dist loadgroup` these share a single worker
+# the slow generator tests run on one worker so the other keeps the stage tests going
 pytestmark = pytest.mark.xdist_group("synth_tiny")
 
 

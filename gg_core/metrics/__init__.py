@@ -1,0 +1,1 @@
+"""Evaluation metrics (REFERENCE §7): surface distances between meshes, image and behaviour errors."""

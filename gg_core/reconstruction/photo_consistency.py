@@ -1,0 +1,152 @@
+"""Photo-consistency refinement: move surface vertices along their normals to where the cameras agree.
+
+Silhouettes cannot see concave regions (the valleys between a skirt's folds): the hull bridges them. For each
+vertex a plane sweep along the normal scores candidate depths by the mean pairwise normalized cross-correlation
+(NCC) of small tangent-plane patches seen by the cameras that face the vertex; score curves are aggregated over
+mesh neighbours (neighbouring points move alike), the best depth is found with sub-step precision, and the
+offsets are fitted smoothly over the mesh, weighted by how clearly each vertex's best score stands out.
+Visibility is decided once, on the hull (which contains the true surface), so later rounds keep the cameras.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..capture.cameras import Camera
+from ..geometry.raycast import RayCaster
+from .mesh_graph import adjacency, smooth, vertex_normals
+from .visual_hull import bilinear
+
+_VERTEX_CHUNK = 1024
+
+
+@dataclass
+class PhotoOptions:
+    search_in: float = 0.06      # m searched inwards (the hull over-estimates) ...
+    search_out: float = 0.01     # ... and outwards (mask and voxel errors)
+    patch: int = 5               # patch side in samples ...
+    patch_spacing: float = 1.0   # ... this many pixel footprints apart
+    min_cosine: float = 0.5      # only cameras facing the vertex within 60 degrees vote
+    aggregate: int = 2           # neighbour-averaging iterations on the score curves
+    min_score: float = 0.2       # aggregated NCC below this: the vertex has no say in the fit
+    stiffness: float = 4.0       # weight of the offset field's smoothness (graph Laplacian)
+    rounds: int = 3              # later rounds search a third of the previous range around the last result
+
+
+def visible_cameras(verts: np.ndarray, normals: np.ndarray, cameras: Sequence[Camera], occluder: RayCaster,
+                    min_cosine: float, lift: float) -> np.ndarray:
+    """[C, V] bool: camera c faces vertex v (cosine above min_cosine), v projects into its image, and the
+    segment from the camera to the vertex (lifted off the surface by `lift`) is not blocked by `occluder`."""
+    seen = np.zeros((len(cameras), len(verts)), bool)
+    lifted = verts + lift * normals
+    for c, cam in enumerate(cameras):
+        to_cam = cam.center - verts
+        cos = np.einsum("ij,ij->i", normals, to_cam) / np.linalg.norm(to_cam, axis=1)
+        uv, z = cam.project(verts)
+        ok = (cos > min_cosine) & (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= cam.width) & \
+             (uv[:, 1] >= 0) & (uv[:, 1] <= cam.height)
+        idx = np.flatnonzero(ok)
+        ok[idx] = ~occluder.segment_blocked(np.broadcast_to(cam.center, (len(idx), 3)), lifted[idx], eps=0.0)
+        seen[c] = ok
+    return seen
+
+
+def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    t1 = np.cross(normals, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return t1, np.cross(normals, t1)
+
+
+def sweep_scores(verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, seen: np.ndarray,
+                 cameras: Sequence[Camera], images: Sequence[np.ndarray], spacing: float, patch: int
+                 ) -> np.ndarray:
+    """[V, D] mean pairwise NCC over the seeing cameras of the patch at verts + offset * normal (NaN when fewer
+    than two cameras see the vertex)."""
+    t1, t2 = tangent_frames(normals)
+    grid = (np.arange(patch) - (patch - 1) / 2) * spacing
+    a, b = [g.ravel() for g in np.meshgrid(grid, grid, indexing="ij")]
+    scores = np.full((len(verts), len(offsets)), np.nan)
+    for s in range(0, len(verts), _VERTEX_CHUNK):
+        sl = slice(s, s + _VERTEX_CHUNK)
+        # [n, D, P, 3] sample points: centre moved along the normal, patch in the tangent plane
+        centre = verts[sl, None, :] + offsets[None, :, None] * normals[sl, None, :]
+        spread = a[None, :, None] * t1[sl, None, :] + b[None, :, None] * t2[sl, None, :]
+        points = centre[:, :, None, :] + spread[:, None, :, :]
+        n, d, p = points.shape[:3]
+        total = np.zeros((n, d, p * 3))
+        count = np.zeros(n)
+        for c, (cam, image) in enumerate(zip(cameras, images)):
+            idx = np.flatnonzero(seen[c, sl])
+            if len(idx) == 0:
+                continue
+            uv, _ = cam.project(points[idx].reshape(-1, 3))
+            colour = bilinear(image, uv[:, 0], uv[:, 1]).reshape(len(idx), d, p * 3)
+            colour = colour - colour.mean(axis=2, keepdims=True)
+            colour /= np.maximum(np.linalg.norm(colour, axis=2, keepdims=True), 1e-6)
+            total[idx] += colour
+            count[idx] += 1
+        ok = count >= 2
+        norm2 = np.einsum("ndk,ndk->nd", total[ok], total[ok])
+        k = count[ok, None]
+        block = np.full((n, d), np.nan)
+        block[ok] = (norm2 - k) / (k * (k - 1))
+        scores[sl] = block
+    return scores
+
+
+def refine_along_normals(verts: np.ndarray, faces: np.ndarray, cameras: Sequence[Camera],
+                         images: Sequence[np.ndarray], occluder: RayCaster, spacing: float,
+                         options: PhotoOptions | None = None) -> tuple[np.ndarray, dict]:
+    """(moved verts, log). `spacing` (m) is the patch sample spacing and the sweep step, about one pixel."""
+    opt = options or PhotoOptions()
+    verts = np.asarray(verts, np.float64).copy()
+    faces = np.asarray(faces, np.int64)
+    adj = adjacency(faces, len(verts))
+    lap = sp.diags(np.asarray(adj.sum(axis=1)).ravel()) - adj
+    normals = vertex_normals(verts, faces)
+    seen = visible_cameras(verts, normals, cameras, occluder, opt.min_cosine, spacing)
+    lo, hi = -opt.search_in, opt.search_out
+    step = 0.5 * spacing
+    log = {"cameras_per_vertex": float(seen.sum(axis=0).mean()), "rounds": []}
+    total_offset = np.zeros(len(verts))
+    for _ in range(opt.rounds):
+        offsets = np.arange(lo, hi + 0.5 * step, step)
+        scores = sweep_scores(verts, normals, offsets, seen, cameras, images, opt.patch_spacing * spacing,
+                              opt.patch)
+        valid = np.isfinite(scores[:, 0])
+        filled = np.where(valid[:, None], scores, 0.0)
+        agg = np.stack([smooth(filled[:, k], adj, opt.aggregate) for k in range(len(offsets))], axis=1)
+        weight = smooth(valid.astype(np.float64), adj, opt.aggregate)
+        agg = agg / np.maximum(weight[:, None], 1e-12)
+        best = np.argmax(agg, axis=1)
+        target = offsets[best] + step * _parabola_peak(agg, best)
+        confidence = np.where(weight > 0.5, np.max(agg, axis=1), 0.0)
+        w = np.where(confidence > opt.min_score, confidence, 0.0)
+        system = (sp.diags(w) + opt.stiffness * lap + sp.identity(len(verts)) * 1e-6).tocsc()
+        move = sp.linalg.spsolve(system, w * target)
+        verts += move[:, None] * normals
+        total_offset += move
+        log["rounds"].append({"search_m": [float(lo), float(hi)], "confident_vertices": int((w > 0).sum()),
+                              "mean_score": float(np.mean(confidence[w > 0])) if (w > 0).any() else 0.0,
+                              "mean_move_m": float(np.abs(move).mean())})
+        normals = vertex_normals(verts, faces)
+        third = (hi - lo) / 6.0
+        lo, hi, step = -third, third, step / 2
+    log["mean_offset_m"] = float(total_offset.mean())
+    return verts, log
+
+
+def _parabola_peak(values: np.ndarray, best: np.ndarray) -> np.ndarray:
+    """Sub-step shift in [-0.5, 0.5] of each row's maximum from a parabola through it and its neighbours."""
+    n = values.shape[1]
+    i = np.clip(best, 1, n - 2)
+    rows = np.arange(len(values))
+    left, mid, right = values[rows, i - 1], values[rows, i], values[rows, i + 1]
+    denom = left - 2 * mid + right
+    shift = np.where(denom < 0, 0.5 * (left - right) / np.where(denom < 0, denom, -1.0), 0.0)
+    interior = (best > 0) & (best < n - 1)
+    return np.where(interior, np.clip(shift, -0.5, 0.5), 0.0)

@@ -1,0 +1,52 @@
+import numpy as np
+
+from gg_core.geometry.raycast import RayCaster
+from gg_core.reconstruction.photo_consistency import PhotoOptions, refine_along_normals, sweep_scores
+from gg_core.reconstruction.mesh_graph import vertex_normals
+
+from .scenes import plane_image
+
+
+def _plane(n: int, size: float, z: float) -> tuple[np.ndarray, np.ndarray]:
+    g = np.linspace(-size / 2, size / 2, n)
+    xx, yy = np.meshgrid(g, g, indexing="ij")
+    verts = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, z)], axis=1)
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return verts, faces
+
+
+def _cameras():
+    from gg_core.capture.cameras import look_at
+
+    eyes = [(0.0, 0.0, 1.0), (0.4, 0.0, 0.9), (-0.4, 0.0, 0.9), (0.0, 0.4, 0.9), (0.0, -0.4, 0.9)]
+    return [look_at(f"c{i}", np.array(e), np.zeros(3), 40.0, 96, 96, up=np.array([0, 1.0, 0]), index=i)
+            for i, e in enumerate(eyes)]
+
+
+def test_sweep_scores_peak_at_the_true_depth():
+    cams = _cameras()
+    images = [plane_image(c) for c in cams]
+    verts, faces = _plane(5, 0.1, 0.0)
+    normals = vertex_normals(verts, faces)
+    normals *= np.sign(normals[:, 2:3])                 # towards the cameras (+z)
+    offsets = np.linspace(-0.03, 0.03, 13)
+    scores = sweep_scores(verts + 0.02 * normals, normals, offsets, np.ones((len(cams), len(verts)), bool),
+                          cams, images, 0.005, 5)
+    np.testing.assert_allclose(offsets[np.argmax(scores, axis=1)], -0.02)
+    assert np.all(scores.max(axis=1) > 0.9)
+
+
+def test_refinement_moves_an_offset_plane_back_onto_the_textured_plane():
+    cams = _cameras()
+    images = [plane_image(c) for c in cams]
+    verts, faces = _plane(15, 0.3, 0.0)
+    if vertex_normals(verts, faces)[0, 2] < 0:
+        faces = faces[:, ::-1]
+    start = verts + [0.0, 0.0, 0.02]                   # 2 cm in front of the true surface (like a hull)
+    far = RayCaster([(np.array([[9.0, 9, 9], [9.1, 9, 9], [9, 9.1, 9]]), np.array([[0, 1, 2]]))])  # occludes nothing
+    moved, log = refine_along_normals(start, faces, cams, images, far, 0.005, PhotoOptions(search_in=0.04))
+    assert np.abs(start[:, 2]).mean() == 0.02
+    assert np.abs(moved[:, 2]).mean() < 0.003
+    assert log["rounds"][0]["confident_vertices"] > 0.8 * len(verts)

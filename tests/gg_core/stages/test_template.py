@@ -1,0 +1,90 @@
+"""Stage 1 end to end on the tiny synthetic capture (6 cameras of 72x96 px: about 2 cm per pixel)."""
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+
+from gg_core.capture.images import read_mask, read_rgb
+from gg_core.capture.layout import FOREGROUND_MASK, GARMENT_MASK, Capture
+from gg_core.gaussians import GaussianTexture
+from gg_core.geometry.meshio import read_mesh, read_obj
+from gg_core.metrics.surface import surface_metrics
+from gg_core.reconstruction.template_mesh import TemplateGeometryOptions, reconstruct_template
+from gg_core.stages.template import TemplateRequest, auto_resolution, run_template
+
+# measured on the tiny preset (seed 0, 00_walk frame 000000): CD 1.31 cm, p2m 1.24 cm, F@1cm 47 %
+CD_BOUND_CM = 2.0
+FSCORE_BOUND = 35.0
+
+
+@pytest.fixture(scope="module")
+def template_project(tiny_capture, tmp_path_factory):
+    project = tmp_path_factory.mktemp("template") / "project"
+    req = TemplateRequest(capture=tiny_capture, project=project, appearance_iterations=10, progress="none")
+    return req, run_template(req)
+
+
+def test_template_outputs_and_accuracy(template_project):
+    req, report_path = template_project
+    report = json.loads(report_path.read_text())
+    verts, faces, uvs, face_uvs = read_obj(req.project / "stage1" / "template.obj")
+    assert report["vertices"] == len(verts) and report["faces"] == len(faces)
+    assert 700 <= len(verts) <= 1800                      # ~1000 for images this small
+    assert report["cd_cm"] < CD_BOUND_CM and report["fscore_1cm"] > FSCORE_BOUND
+    assert report["p2m_cm"] < CD_BOUND_CM
+    assert [p["genus"] for p in report["geometry"]["pieces"]] == [0]   # one piece, no handles (a skirt: a tube)
+    # the report's metrics are the template's, against the frame's ground truth
+    gt = read_mesh(Capture(req.capture).sequence("00_walk").gt_garment_files["000000"])
+    assert surface_metrics(verts, faces, *gt)["cd_cm"] == pytest.approx(report["cd_cm"], rel=1e-3)  # OBJ: 7 digits
+    assert report["sequence"] == "00_walk" and report["frame"] == "000000" and len(report["cameras"]) == 6
+    # UV atlas: every face has UVs inside the unit square, and no UV triangle is degenerate
+    assert uvs is not None and face_uvs.shape == faces.shape
+    assert uvs.min() >= 0.0 and uvs.max() <= 1.0
+    t = uvs[face_uvs]
+    uv_area = 0.5 * np.abs((t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1])
+                           - (t[:, 2, 0] - t[:, 0, 0]) * (t[:, 1, 1] - t[:, 0, 1]))
+    assert uv_area.min() > 0
+    # Gaussians bound to the template's faces, texture at the automatic resolution
+    texture = GaussianTexture.from_state(dict(np.load(req.project / "stage1" / "gaussians.npz")))
+    assert len(texture) == report["gaussians"] > len(faces)
+    assert texture.face_ids.max() < len(faces) and texture.resolution == report["texture_resolution"]
+    np.testing.assert_allclose(texture.uvs, uvs, atol=1e-6)
+    assert report["appearance"]["rgb_loss_after"] < report["appearance"]["rgb_loss_before"]
+    assert set(report["timings"]) >= {"load_s", "geometry_s", "appearance_s", "metrics_s", "total_s"}
+
+
+def test_rerun_skips_and_appearance_change_keeps_the_mesh(template_project):
+    req, report_path = template_project
+    obj = req.project / "stage1" / "template.obj"
+    before = (report_path.stat().st_mtime_ns, obj.stat().st_mtime_ns)
+    start = time.perf_counter()
+    assert run_template(req) == report_path
+    assert time.perf_counter() - start < 5.0
+    assert (report_path.stat().st_mtime_ns, obj.stat().st_mtime_ns) == before
+    req2 = TemplateRequest(capture=req.capture, project=req.project, appearance_iterations=5, progress="none")
+    report = json.loads(run_template(req2).read_text())
+    assert obj.stat().st_mtime_ns == before[1]             # geometry reused
+    assert report["appearance"]["iterations"] == 5 and report["inputs"]["options"]["appearance_iterations"] == 5
+
+
+def test_photo_consistency_lowers_the_error_of_the_silhouette_template(tiny_capture):
+    seq = Capture(tiny_capture).sequence("00_walk")
+    cams = list(seq.cameras.values())
+    fg = [read_mask(seq.image_path(c.id, "000000", FOREGROUND_MASK)) for c in cams]
+    gm = [read_mask(seq.image_path(c.id, "000000", GARMENT_MASK)) for c in cams]
+    rgb = [read_rgb(seq.image_path(c.id, "000000")) for c in cams]
+    gt = read_mesh(seq.gt_garment_files["000000"])
+    hull = reconstruct_template(cams, fg, gm, None, TemplateGeometryOptions(photo=None))
+    photo = reconstruct_template(cams, fg, gm, rgb)
+    cd_hull = surface_metrics(hull.verts, hull.faces, *gt)["cd_cm"]
+    cd_photo = surface_metrics(photo.verts, photo.faces, *gt)["cd_cm"]
+    assert cd_photo < cd_hull - 0.4                        # measured 2.27 -> 1.31 cm
+
+
+def test_auto_resolution_follows_the_pixel_footprint():
+    assert auto_resolution(0.6, 0.0088) == 256             # demo preset
+    assert auto_resolution(0.6, 0.0235) == 128             # tiny preset
+    assert auto_resolution(0.6, 0.001) == 512              # capped
