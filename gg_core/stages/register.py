@@ -1,0 +1,330 @@
+"""Stage 2 (register): the template mesh fitted to every frame of every sequence, with fixed topology.
+
+Inputs: stage 1's <project>/stage1/template.obj and gaussians.npz (and reports/template.json, which names the
+template frame), and per sequence the cameras, images, masks and body meshes. Per sequence the template is
+first aligned rigidly to the first frame (--align): "body" moves it with the rigid motion of the body part
+under it from the template frame to that frame; "icp" then refines that by ICP against a point cloud of the
+frame reconstructed from its masks (stage 1's geometry code); "none" keeps the template where it is. Then every
+frame is fitted by the tracker (registration.tracker), warm-started with a constant-velocity prediction from
+the previous two frames.
+
+Outputs: <project>/stage2/<sequence>/meshes/<frame>.ply (template topology), renders for inspection
+(<project>/stage2/<sequence>/renders/<frame>.png: target | render | difference for one camera),
+<project>/stage2/<sequence>/frames.json (per-frame logs and input keys) and <project>/reports/register.json
+with per sequence cd_cm, p2m_cm, fscore_1cm (only when the capture has ground-truth meshes), l_body (the
+body term's value at the end of each frame's fit, mean over frames), s_per_frame (wall clock of the fit) and
+cpu_s_per_frame. Ground truth is read only to score finished meshes.
+
+Resumable per frame: a frame is skipped when its mesh exists and its key (stage 1 files, options, the frame's
+input files and the previous frame's key) is unchanged; changing one frame refits the frames after it.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..capture.layout import FOREGROUND_MASK, GARMENT_MASK, RGB, Capture, Sequence
+from ..errors import InputError
+from ..geometry.meshio import read_mesh, read_obj, write_ply
+from ..jobs import Progress
+from ..storage import atomic_path, write_json, write_report
+
+STAGE = "register"
+ICP_CLOUD_VERTICES = 2000    # points of the first frame's reconstruction that ICP aligns to
+ALIGN_MODES = ("body", "icp", "none")
+MIN_ATLAS = 32               # coarsest Gaussian texture side registration uses
+
+
+@dataclass
+class RegisterRequest:
+    capture: Path
+    project: Path
+    sequences: list[str] = field(default_factory=list)   # default: all
+    ablation: str = "full"
+    iterations: int | None = None        # per frame (default: the tracker's); the first frame gets 8/3 as many
+    frames: int | None = None            # register only the first N frames of each sequence
+    align: str = "body"                  # first-frame alignment: body | icp | none
+    icp_scale: bool = False              # let ICP scale the template too
+    texture_factor: int | None = None    # coarsen the Gaussian texture by this factor (None: automatic, 1: none)
+    renders: int = 3                     # frames per sequence rendered for inspection
+    seed: int = 0
+    progress: str = "bar"
+
+
+@dataclass
+class Stage1:
+    verts: np.ndarray
+    faces: np.ndarray
+    texture: object                      # GaussianTexture
+    files: list
+
+
+def load_stage1(project: Path) -> Stage1:
+    """The template and its Gaussian texture; InputError when stage 1 has not run or its files disagree."""
+    from ..gaussians.texture import GaussianTexture  # noqa: PLC0415 - torch
+
+    obj, gauss = project / "stage1" / "template.obj", project / "stage1" / "gaussians.npz"
+    for path in (obj, gauss):
+        if not path.is_file():
+            raise InputError("stage 1 output missing", path, "run gg template first")
+    verts, faces, _, _ = read_obj(obj)
+    try:
+        with np.load(gauss) as data:
+            texture = GaussianTexture.from_state({k: data[k] for k in data.files})
+    except (OSError, ValueError, KeyError) as exc:
+        raise InputError(f"gaussians.npz cannot be read ({exc.__class__.__name__})", gauss,
+                         "run gg template again") from None
+    if len(faces) == 0 or (len(texture) and int(texture.face_ids.max()) >= len(faces)) or \
+            (texture.face_uvs is not None and len(texture.face_uvs) != len(faces)):
+        raise InputError(f"template topology mismatch: gaussians.npz binds to {_face_count(texture)} faces, "
+                         f"template.obj has {len(faces)}", project / "stage1",
+                         "run gg template again so both files come from one run")
+    files = [[p.name, p.stat().st_size, p.stat().st_mtime_ns] for p in (obj, gauss)]
+    return Stage1(verts, faces, texture, files)
+
+
+def _face_count(texture) -> int:
+    return len(texture.face_uvs) if texture.face_uvs is not None else int(texture.face_ids.max()) + 1
+
+
+def check_sequence(seq: Sequence, frames: list[str]) -> None:
+    """Every frame needs a body mesh (occluder and collider); fail before any work."""
+    missing = [f for f in frames if f not in seq.body_files]
+    if missing:
+        raise InputError(f"body mesh missing for frame '{missing[0]}'" +
+                         (f" and {len(missing) - 1} more" if len(missing) > 1 else ""), seq.root / "body",
+                         "add <sequence>/body/<frame>.ply for every frame (names must match the image frames)")
+
+
+def frame_files(seq: Sequence, frame: str) -> list:
+    paths = [seq.root / "cameras.json", seq.body_path(frame)]
+    for cid in seq.camera_ids:
+        paths += [seq.image_path(cid, frame, kind) for kind in (RGB, GARMENT_MASK, FOREGROUND_MASK)]
+    return [[str(p.relative_to(seq.root)), p.stat().st_size, p.stat().st_mtime_ns] for p in paths]
+
+
+def _digest(obj: object) -> str:
+    return hashlib.sha1(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def first_frame_cloud(seq: Sequence, frame: str) -> np.ndarray:
+    """Points of the garment's surface in `frame`, reconstructed from its masks (stage 1's geometry code)."""
+    from ..capture.images import read_mask  # noqa: PLC0415
+    from ..reconstruction.template_mesh import TemplateGeometryOptions, reconstruct_template  # noqa: PLC0415
+
+    cams = [seq.cameras[c] for c in seq.camera_ids]
+    garment = [read_mask(seq.image_path(c, frame, GARMENT_MASK)) for c in seq.camera_ids]
+    foreground = [read_mask(seq.image_path(c, frame, FOREGROUND_MASK)) for c in seq.camera_ids]
+    try:
+        geometry = reconstruct_template(cams, foreground, garment,
+                                        options=TemplateGeometryOptions(vertices=ICP_CLOUD_VERTICES, photo=None))
+    except ValueError as exc:
+        raise InputError(f"cannot reconstruct the first frame '{frame}' for alignment ({exc})", seq.root,
+                         "check the garment and foreground masks of that frame") from None
+    return geometry.verts
+
+
+def texture_factor(texture, views) -> int:
+    """How much the stage 1 texture can be coarsened for registration: the largest power of two that keeps at
+    least one Gaussian per garment pixel (about half of the garment faces a camera). Measured on the demo
+    capture: the 42k-Gaussian texture halved to 10.5k gives the same CD (0.35 cm after 100 steps on frame 4)
+    in half the time."""
+    if texture.texels is None:
+        return 1
+    pixels = float(np.mean([float(v.garment.sum()) for v in views]))
+    factor = 1
+    while texture.resolution // (2 * factor) >= MIN_ATLAS and len(texture) / (2 * factor) ** 2 / 2 >= pixels:
+        factor *= 2
+    return factor
+
+
+def template_frame(capture: Capture, project: Path) -> tuple[Sequence, str] | None:
+    """The (sequence, frame) stage 1 reconstructed the template from, per its report (None if unknown)."""
+    path = project / "reports" / "template.json"
+    if not path.is_file():
+        return None
+    try:
+        report = json.loads(path.read_text())
+        seq = capture.sequences.get(report.get("sequence"))
+    except (json.JSONDecodeError, AttributeError):
+        return None
+    frame = report.get("frame")
+    return (seq, frame) if seq is not None and frame in seq.body_files else None
+
+
+def align_first_frame(capture: Capture, project: Path, seq: Sequence, frame: str, template: np.ndarray,
+                      body: np.ndarray, mode: str, scale: bool) -> tuple[np.ndarray, dict]:
+    """The template's vertices aligned to `frame` (the first of `seq`) and a log of how."""
+    from ..registration.icp import Similarity, body_alignment, icp  # noqa: PLC0415
+
+    start = time.perf_counter()
+    log: dict = {"mode": mode}
+    motion = Similarity()
+    if mode in ("body", "icp"):
+        source = template_frame(capture, project)
+        if source is not None:
+            source_body = read_mesh(source[0].body_path(source[1]))[0]
+            if source_body.shape == body.shape:
+                motion = body_alignment(template, source_body, body)
+                log["from"] = f"{source[0].name}/{source[1]}"
+        log["body_rotation_deg"] = float(np.degrees(np.arccos(np.clip((np.trace(motion.R) - 1) / 2, -1, 1))))
+        log["body_translation_m"] = motion.t.tolist()
+    if mode == "icp":
+        cloud = first_frame_cloud(seq, frame)
+        motion, icp_log = icp(template, cloud, init=motion, scale=scale)
+        log.update(icp_rms_m=icp_log["rms"][-1], icp_iterations=icp_log["iterations"], scale=motion.s)
+    log["seconds"] = time.perf_counter() - start
+    return motion.apply(template), log
+
+
+def run_register(req: RegisterRequest) -> Path:
+    from ..metrics.surface import surface_metrics  # noqa: PLC0415
+    from ..physics.contact import BodyCollider  # noqa: PLC0415
+    from ..registration.appearance import downsample_texture  # noqa: PLC0415
+    from ..registration.tracker import Tracker, TrackerConfig, ablation_config  # noqa: PLC0415
+    from ..registration.views import load_body, load_views  # noqa: PLC0415
+    from .behavior import hand_mask  # noqa: PLC0415
+
+    start = time.perf_counter()
+    capture = Capture(req.capture)
+    project = Path(req.project)
+    stage1 = load_stage1(project)
+    names = list(req.sequences) or list(capture.sequences)
+    seqs = [capture.sequence(n) for n in names]
+    if req.frames is not None and req.frames < 1:
+        raise InputError(f"--frames must be at least 1, got {req.frames}", "--frames", "pass a positive count")
+    frames_of = {s.name: s.frames[: req.frames] if req.frames else s.frames for s in seqs}
+    for s in seqs:
+        if not frames_of[s.name]:
+            raise InputError("the sequence has no frames", s.root, "add rgb_images/<frame>.png for every camera")
+        check_sequence(s, frames_of[s.name])
+    base = TrackerConfig(seed=req.seed)
+    if req.iterations is not None:
+        if req.iterations < 1:
+            raise InputError(f"--iterations must be at least 1, got {req.iterations}", "--iterations",
+                             "pass a positive count")
+        base = TrackerConfig(iterations=req.iterations, first_iterations=max(1, req.iterations * 8 // 3),
+                             seed=req.seed)
+    if req.align not in ALIGN_MODES:
+        raise InputError(f"unknown alignment '{req.align}'", "--align", f"choose one of {', '.join(ALIGN_MODES)}")
+    try:
+        config = ablation_config(req.ablation, base)
+    except ValueError as exc:
+        raise InputError(str(exc), "--ablation", "choose full, only-rgb, no-body or body-always") from None
+    first = seqs[0]
+    if req.texture_factor is not None and (req.texture_factor < 1 or req.texture_factor & (req.texture_factor - 1)):
+        raise InputError(f"--texture-factor must be a power of two, got {req.texture_factor}", "--texture-factor",
+                         "pass 1 (the stage 1 texture as it is), 2, 4, ...")
+    factor = req.texture_factor or texture_factor(stage1.texture, load_views(first, frames_of[first.name][0]))
+    texture = downsample_texture(stage1.texture, stage1.verts, stage1.faces, factor)
+    options = {"config": asdict(config), "ablation": req.ablation, "align": req.align, "icp_scale": req.icp_scale,
+               "texture_factor": factor}
+    progress = Progress(STAGE, sum(len(f) + 1 for f in frames_of.values()), req.progress)
+    report: dict[str, dict] = {}
+    for seq in seqs:
+        frames = frames_of[seq.name]
+        out_dir = project / "stage2" / seq.name
+        log_path = out_dir / "frames.json"
+        logs = json.loads(log_path.read_text()) if log_path.is_file() else {}
+        body0 = load_body(seq, frames[0])
+        collider = BodyCollider(body0[1], len(body0[0]), exclude=hand_mask(len(body0[0])))
+        tracker = Tracker(texture, stage1.verts, stage1.faces, collider, config)
+        key = _digest([stage1.files, options, seq.name])
+        previous: list[np.ndarray] = []
+        align_log: dict = logs.get("_alignment", {})
+        for k, frame in enumerate(frames):
+            key = _digest([key, frame, frame_files(seq, frame)])
+            mesh_path = out_dir / "meshes" / f"{frame}.ply"
+            if mesh_path.is_file() and logs.get(frame, {}).get("key") == key:
+                previous = (previous + [read_mesh(mesh_path)[0]])[-2:]
+                progress.step(f"{seq.name} {frame}: unchanged, kept", advance=2 if k == 0 else 1)
+                continue
+            body = load_body(seq, frame)
+            views = load_views(seq, frame, body=body)
+            if k == 0:
+                guess, align_log = align_first_frame(capture, project, seq, frame, stage1.verts, body[0],
+                                                     req.align, req.icp_scale)
+                progress.step(f"{seq.name}: aligned the template ({req.align})")
+                iterations = config.first_iterations
+            else:
+                guess = previous[-1] if len(previous) < 2 else 2 * previous[-1] - previous[-2]
+                iterations = config.iterations
+            result = tracker.fit_frame(guess, views, body[0], previous=previous[-1] if previous else None,
+                                       iterations=iterations)
+            write_ply(mesh_path, result.verts, stage1.faces)
+            previous = (previous + [result.verts])[-2:]
+            logs[frame] = {"key": key, **{k2: v for k2, v in result.log.items() if k2 != "trace"}}
+            logs["_alignment"] = align_log
+            write_json(log_path, logs)
+            progress.step(f"{seq.name} {frame}: {result.log['iterations']} iterations, "
+                          f"{result.log['seconds']:.1f} s")
+        report[seq.name] = sequence_report(seq, frames, logs, stage1.faces, out_dir, surface_metrics)
+        report[seq.name]["alignment"] = align_log
+        _write_renders(seq, frames, out_dir, stage1, req.renders)
+    payload = {"ablation": req.ablation, "sequences": report, "mean": _mean_metrics(report),
+               "template": {"vertices": len(stage1.verts), "faces": len(stage1.faces),
+                            "gaussians": len(stage1.texture), "texture_factor": factor,
+                            "registration_gaussians": len(texture)},
+               "tracker": asdict(config), "seconds": time.perf_counter() - start,
+               "inputs": {"stage1": stage1.files, "options": options}}
+    path = write_report(project, STAGE, payload)
+    progress.done(str(path))
+    return path
+
+
+def sequence_report(seq: Sequence, frames: list[str], logs: dict, faces: np.ndarray, out_dir: Path,
+                    surface_metrics) -> dict:
+    """Per-sequence means of the frame logs and, with ground truth, of the surface metrics per frame."""
+    per_frame = []
+    gt = seq.gt_garment_files
+    for frame in frames:
+        row = {"frame": frame, "l_body": logs[frame]["l_body"], "seconds": logs[frame]["seconds"],
+               "cpu_seconds": logs[frame]["cpu_seconds"], "iterations": logs[frame]["iterations"]}
+        if frame in gt:
+            verts = read_mesh(out_dir / "meshes" / f"{frame}.ply")[0]
+            gv, gf = read_mesh(gt[frame])
+            row.update(surface_metrics(verts, faces, gv, gf))
+        per_frame.append(row)
+    out = {"frames": len(frames), "l_body": float(np.mean([r["l_body"] for r in per_frame])),
+           "s_per_frame": float(np.mean([r["seconds"] for r in per_frame])),
+           "cpu_s_per_frame": float(np.mean([r["cpu_seconds"] for r in per_frame]))}
+    if all("cd_cm" in r for r in per_frame):
+        out.update({k: float(np.mean([r[k] for r in per_frame])) for k in ("cd_cm", "p2m_cm", "fscore_1cm")})
+    out["per_frame"] = per_frame
+    return out
+
+
+def _mean_metrics(report: dict) -> dict:
+    keys = ("cd_cm", "p2m_cm", "fscore_1cm", "l_body", "s_per_frame", "cpu_s_per_frame")
+    return {k: float(np.mean([r[k] for r in report.values()])) for k in keys
+            if all(k in r for r in report.values())}
+
+
+def _write_renders(seq: Sequence, frames: list[str], out_dir: Path, stage1: Stage1, count: int) -> None:
+    """target | render | 3x difference of the camera that sees most of the garment, for `count` frames."""
+    import torch  # noqa: PLC0415
+    from PIL import Image  # noqa: PLC0415
+
+    from ..registration.appearance import contrast_background  # noqa: PLC0415
+    from ..registration.photometric import render_view  # noqa: PLC0415
+    from ..registration.views import load_views  # noqa: PLC0415
+
+    picks = sorted({frames[round(i * (len(frames) - 1) / max(count - 1, 1))] for i in range(count)}) if count else []
+    for frame in picks:
+        views = load_views(seq, frame)
+        view = max(views, key=lambda v: float(v.garment.sum()))
+        verts = torch.from_numpy(read_mesh(out_dir / "meshes" / f"{frame}.ply")[0]).float()
+        bg = contrast_background(views)
+        with torch.no_grad():
+            image = render_view(stage1.texture, verts, stage1.faces, view, bg)["image"]
+        target = view.target(bg)
+        m = view.loss_mask[..., None]
+        shown = image * m + target * (1 - m)
+        row = torch.cat((target, shown, ((shown - target).abs() * 3).clamp(0, 1)), dim=1).numpy()
+        with atomic_path(out_dir / "renders" / f"{frame}.png") as tmp:
+            Image.fromarray((row * 255).round().astype(np.uint8)).save(tmp, format="PNG")
