@@ -87,6 +87,26 @@ class Wind(Term):
         return float((step.dt * c * np.abs(vn) ** 3 / 3).sum())
 
 
+class WindPressure(Term):
+    """Steady wind as a pressure on the cloth: force A (n . w) n per vertex, w the pressure vector (Pa) and n the
+    cloth normal at the step start, independent of the cloth's velocity (as Blender's wind field acts on cloth
+    faces). Pushes regions facing the wind even at rest, vanishes where the cloth lies along it; linear in w."""
+
+    name = "wind_pressure"
+    defaults = {"pressure": (0.0, 0.0, 0.0)}
+
+    def energy(self, x, step, rest):
+        n = step.normal_prev
+        return -(rest.vertex_area * (n * self.params["pressure"]).sum(-1) * (n * x).sum(-1)).sum(-1)
+
+    def assemble(self, x, step, num, system):
+        n = step.normal_prev
+        force = (num.vertex_area * (n @ self.p("pressure")))[:, None] * n
+        if system is not None:
+            system.add_vertex(-force)
+        return float(-(force * x).sum())
+
+
 class AirDrag(Wind):
     """Quadratic aerodynamic drag in still air: force -coef A |v_n| v_n n per vertex (v_n the normal velocity,
     A the vertex area, coef = rho_air C_d / 2 in kg/m^3). Strongest on large free panels at peak speed."""
@@ -235,8 +255,8 @@ class GravityOffset(Term):
         return float(-(mg * x).sum())
 
 
-LIBRARY: tuple[type[Term], ...] = (BodyFriction, AirDrag, Wind, MassDamping, StrainRateDamping,
-                                   AnisotropicStretch, StrainStiffening, GravityOffset)
+LIBRARY: tuple[type[Term], ...] = (BodyFriction, AirDrag, Wind, WindPressure, MassDamping,
+                                   StrainRateDamping, AnisotropicStretch, StrainStiffening, GravityOffset)
 TERMS: dict[str, type[Term]] = {cls.name: cls for cls in BASE_TERMS + LIBRARY}
 DEFAULT_TERMS: tuple[str, ...] = ("inertia", "gravity", "stretching", "bending", "collision", "body_friction")
 

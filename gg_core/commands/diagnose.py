@@ -1,0 +1,57 @@
+"""`gg diagnose`: find and name the physics the fitted simulator leaves out, add it, prove it on held-out data."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from ..cli import add_progress_option
+
+HELP = "missing-physics diagnosis: residual map and curve, named effect, refit, held-out rollout error before/after"
+
+
+def configure(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("capture", type=Path, help="capture folder")
+    parser.add_argument("--project", type=Path, required=True,
+                        help="project folder: writes diagnose/ and reports/diagnose.json|html")
+    parser.add_argument("--source", choices=("gt", "registered"), default="gt",
+                        help="garment meshes to diagnose: registered (P/stage2/<seq>/meshes) or the synthetic "
+                             "capture's ground truth (default)")
+    parser.add_argument("--train", nargs="+", default=[], metavar="SEQ",
+                        help="training sequences (default: the behaviour stage's split)")
+    parser.add_argument("--heldout", nargs="+", default=[], metavar="SEQ",
+                        help="held-out sequences that confirm an effect (default: the others)")
+    parser.add_argument("--noise-mm", type=float, default=0.0,
+                        help="add spatially correlated noise of this standard deviation (mm) to the garment meshes")
+    parser.add_argument("--noise-length-mm", type=float, default=50.0, help="correlation length of that noise (mm)")
+    parser.add_argument("--attach-tol-mm", type=float, default=3.0,
+                        help="vertices that stay this close to a fixed place on the body are attached (pinned)")
+    parser.add_argument("--baseline-iterations", type=int, default=15,
+                        help="L-BFGS iterations of the global baseline fit")
+    parser.add_argument("--refit-iterations", type=int, default=8,
+                        help="L-BFGS iterations of each confirming refit")
+    parser.add_argument("--max-samples", type=int, default=24, help="teacher-forced frames per fit evaluation")
+    parser.add_argument("--min-gain", type=float, default=0.10,
+                        help="relative held-out rollout improvement an effect needs to be accepted")
+    parser.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates")
+    parser.add_argument("--fps", type=float, default=30.0, help="frame rate of the sequences")
+    parser.add_argument("--substeps", type=int, default=2, help="implicit steps per frame (fits and rollouts)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the noise, the patches and the bootstrap")
+    add_progress_option(parser)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..stages.diagnose import DiagnoseRequest, run_diagnose
+
+    req = DiagnoseRequest(capture=args.capture, project=args.project, source=args.source, train=args.train,
+                          heldout=args.heldout, noise_mm=args.noise_mm, noise_length_mm=args.noise_length_mm,
+                          attach_tol_mm=args.attach_tol_mm, fps=args.fps, substeps=args.substeps, seed=args.seed,
+                          baseline_iterations=args.baseline_iterations, refit_iterations=args.refit_iterations,
+                          max_samples=args.max_samples, min_gain=args.min_gain, bootstrap=args.bootstrap,
+                          progress=args.progress)
+    report = run_diagnose(req)
+    if args.progress != "jsonl":
+        data = json.loads(report.read_text())
+        print(json.dumps({"report": str(report), **{k: data[k] for k in (
+            "verdict", "accepted", "heldout_l2_before", "heldout_l2_after")}}))
+    return 0

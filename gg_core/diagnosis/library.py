@@ -1,0 +1,248 @@
+"""Physically named candidate forces the diagnosis regresses the residual on (REFERENCE.md §6 table).
+
+Each candidate is a force field linear in its coefficients: `columns` gives the force per unit coefficient on
+every vertex of every observed step, evaluated on the same states as the residual (`residuals.py`). `model` maps
+fitted coefficients to what the simulator needs to reproduce the effect: force-library terms
+(gg_core/physics/forces.py) with the parameters to refit, or material fields on a garment region (a heavy patch is
+per-vertex density, a tight seam per-edge rest length, as forces.py documents).
+
+`equivalence` names the class of effects the data cannot tell apart; the diagnosis names classes, and a
+benchmark scores an answer right when its class matches. Coefficient bounds make one-sided effects one-sided
+(damping and drag only remove energy; friction only adds to the baseline's).
+"""
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Callable, Iterator
+
+import numpy as np
+import torch
+
+from ..physics.cloth import Cloth, Rest
+from ..physics.forces import TERMS
+from ..physics.material import Material
+from ..physics.simulator import ImplicitSimulator
+from ..physics.terms import StepInputs, Term
+from .residuals import FrameBatch
+
+AXES = ("x", "y", "z")
+# the synthetic generator's hidden effects (gg_core/synth/effects.py) and the class that names each correctly
+SYNTH_EFFECT_CLASS = {"none": "none", "wind": "wind", "air_drag": "linear_damping", "friction": "friction",
+                      "shrink": "rest_length", "stiff_patch": "region_stiffness", "gravity": "gravity"}
+
+
+@dataclass
+class Context:
+    """What candidate forces are computed from: the simulator with its fitted baseline, the observed steps, and
+    the garment region the localization found (per-vertex weights in [0, 1], None if none stood out)."""
+
+    sim: ImplicitSimulator
+    batch: FrameBatch
+    step: StepInputs
+    rest: Rest
+    region: np.ndarray | None = None
+
+    @classmethod
+    def build(cls, sim: ImplicitSimulator, batch: FrameBatch, region: np.ndarray | None = None) -> "Context":
+        with torch.no_grad():
+            rest = sim.cloth.rest()
+        return cls(sim, batch, batch.stacked(sim), rest, region)
+
+    def term(self, name: str) -> Term | None:
+        return next((t for t in self.sim.terms if t.name == name), None)
+
+    def force(self, terms: list[Term], rest: Rest | None = None) -> np.ndarray:
+        """[N,V,3] force (minus the energy gradient) of `terms` at the observed end states, zero on pins."""
+        x = torch.tensor(self.batch.x_next, requires_grad=True)
+        rest = rest or self.rest
+        (grad,) = torch.autograd.grad(sum(t.energy(x, self.step, rest).sum() for t in terms), x)
+        return -grad.numpy() * self.sim.num.free[None, :, None]
+
+
+@dataclass
+class ModelChange:
+    """How an effect enters the simulator: terms switched on (name -> parameters, replacing a term already there),
+    the term parameters refitted as log-scales of those values, and region material fields as initial log-scales
+    ('density', 'stretch' = mu and lambda, 'bending', 'rest' = rest lengths) on the localized region."""
+
+    terms: dict[str, dict] = field(default_factory=dict)
+    fit: tuple[str, ...] = ()
+    region: dict[str, float] = field(default_factory=dict)
+
+
+def with_terms(terms: list[Term], extra: dict[str, dict]) -> list[Term]:
+    """`terms` with the named force-library terms replaced (same name) or appended, built from `extra`."""
+    names = {t.name for t in terms}
+    return [TERMS[t.name](**extra[t.name]) if t.name in extra else t for t in terms] + \
+        [TERMS[n](**p) for n, p in extra.items() if n not in names]
+
+
+def apply_region(cloth: Cloth, region: np.ndarray, logs: dict[str, torch.Tensor | float]) -> None:
+    """Scale the region's material and rest lengths by exp(log x weight), in place and differentiable in `logs`
+    ('density', 'stretch' = mu and lambda, 'bending', 'rest')."""
+    w = torch.from_numpy(region)
+
+    def scale(key: str) -> torch.Tensor:
+        return torch.exp(torch.as_tensor(logs.get(key, 0.0), dtype=torch.float64) * w)
+
+    mat = cloth.material
+    cloth.material = Material(density=mat.density * scale("density"), mu=mat.mu * scale("stretch"),
+                              lam=mat.lam * scale("stretch"), bending=mat.bending * scale("bending"))
+    if "rest" in logs:
+        edge_w = torch.from_numpy(region[cloth.topology.edges].mean(1))
+        cloth.rest_lengths = cloth.rest_lengths * torch.exp(torch.as_tensor(logs["rest"]) * edge_w)
+
+
+@contextmanager
+def applied(sim: ImplicitSimulator, change: ModelChange, region: np.ndarray | None) -> Iterator[ImplicitSimulator]:
+    """The simulator with `change` in effect; everything is restored on exit."""
+    cloth = sim.cloth
+    saved = sim.terms, cloth.material, cloth.rest_lengths
+    try:
+        sim.terms = with_terms(sim.terms, change.terms)
+        if change.region:
+            apply_region(cloth, region, change.region)
+        sim.refresh()
+        yield sim
+    finally:
+        sim.terms, cloth.material, cloth.rest_lengths = saved
+        sim.refresh()
+
+
+@dataclass(frozen=True)
+class Candidate:
+    name: str
+    equivalence: str
+    description: str            # the force and where it shows
+    coefficients: tuple[str, ...]
+    unit: str
+    bounds: tuple[float, float]  # for every coefficient
+    columns: Callable[[Context], np.ndarray]        # [K,N,V,3] force per unit coefficient
+    model: Callable[[np.ndarray, Context], ModelChange]
+    needs_region: bool = False
+
+    def params(self, coefs: np.ndarray) -> dict[str, float]:
+        return {k: float(c) for k, c in zip(self.coefficients, coefs)}
+
+    def probes(self, ctx: Context, acceleration: float) -> list[tuple[float, Callable]]:
+        """One model change per coefficient, sized so that its force is `acceleration` (m/s^2, RMS over free
+        vertices and steps) at the observed states: small enough to stay linear, large enough to beat the
+        solver's tolerance. Coefficients whose force vanishes on these data (no contact, no region) are probed
+        with size 0, which callers skip."""
+        forces = self.columns(ctx)
+        free = ctx.sim.num.free > 0
+        out = []
+        for k in range(len(self.coefficients)):
+            rms = float(np.sqrt(((forces[k][:, free] / ctx.sim.num.mass[free, None]) ** 2).mean()))
+            size = acceleration / rms if rms > 0 else 0.0
+            unit = np.eye(len(self.coefficients))[k] * size
+            out.append((size, lambda u=unit: applied(ctx.sim, self.model(u, ctx), ctx.region)))
+        return out
+
+
+def _term_columns(name: str, units: list[dict]) -> Callable[[Context], np.ndarray]:
+    return lambda ctx: np.stack([ctx.force([TERMS[name](**u)]) for u in units])
+
+
+def _scalar_term(term: str, key: str) -> Callable[[np.ndarray, Context], ModelChange]:
+    return lambda c, ctx: ModelChange({term: {key: float(c[0])}}, (f"{term}.{key}",))
+
+
+def _vector_term(term: str, key: str) -> Callable[[np.ndarray, Context], ModelChange]:
+    return lambda c, ctx: ModelChange({term: {key: tuple(float(v) for v in c)}}, (f"{term}.{key}",))
+
+
+def _friction_model(c: np.ndarray, ctx: Context) -> ModelChange:
+    base = ctx.term("body_friction")
+    mu = (0.0 if base is None else base.p("mu")) + float(c[0])
+    return ModelChange({"body_friction": {"mu": mu}}, ("body_friction.mu",))
+
+
+def _anisotropy_model(c: np.ndarray, ctx: Context) -> ModelChange:
+    fit = tuple(f"anisotropic_stretch.{k}" for k, v in zip(("k_warp", "k_weft"), c) if v > 0)
+    return ModelChange({"anisotropic_stretch": {"k_warp": float(c[0]), "k_weft": float(c[1])}}, fit)
+
+
+def _region_columns(keys: tuple[str, ...], h: float = 1e-4) -> Callable[[Context], np.ndarray]:
+    """Change of the simulator's total force per unit log-scale of each region field (central difference through
+    apply_region, so the column is exactly what the refit will change: mass in inertia and gravity, stiffness in
+    stretching and bending, rest lengths in both)."""
+
+    def columns(ctx: Context) -> np.ndarray:
+        cloth = ctx.sim.cloth
+        out = []
+        for key in keys:
+            pair = []
+            for sign in (1.0, -1.0):
+                saved = cloth.material, cloth.rest_lengths
+                try:
+                    apply_region(cloth, ctx.region, {key: sign * h})
+                    with torch.no_grad():
+                        rest = cloth.rest()
+                    pair.append(ctx.force(ctx.sim.terms, rest))
+                finally:
+                    cloth.material, cloth.rest_lengths = saved
+            out.append((pair[0] - pair[1]) / (2 * h))
+        return np.stack(out)
+
+    return columns
+
+
+def _region_model(keys: tuple[str, ...]) -> Callable[[np.ndarray, Context], ModelChange]:
+    return lambda c, ctx: ModelChange(region={k: float(np.log1p(max(v, -0.9))) for k, v in zip(keys, c)})
+
+
+CANDIDATES: tuple[Candidate, ...] = (
+    Candidate("air_drag", "quadratic_drag",
+              "quadratic aerodynamic drag -coef A |v_n| v_n n: large free panels at peak speed, normal only",
+              ("coef",), "kg/m^3", (0.0, np.inf),
+              _term_columns("air_drag", [{"coef": 1.0}]), _scalar_term("air_drag", "coef")),
+    Candidate("wind", "wind",
+              "steady wind pressure A (n.w) n: regions facing the wind, even at rest, not along it",
+              tuple(f"pressure_{a}" for a in AXES), "Pa", (-np.inf, np.inf),
+              _term_columns("wind_pressure", [{"pressure": tuple(np.eye(3)[k])} for k in range(3)]),
+              _vector_term("wind_pressure", "pressure")),
+    Candidate("mass_damping", "linear_damping",
+              "linear damping -alpha m v (Rayleigh mass damping, the same as linear isotropic air drag for uniform "
+              "density): everywhere, in all directions, proportional to speed",
+              ("alpha",), "1/s", (0.0, np.inf),
+              _term_columns("mass_damping", [{"alpha": 1.0}]), _scalar_term("mass_damping", "alpha")),
+    Candidate("strain_rate_damping", "material_damping",
+              "internal damping against the edge strain rate: stretch waves and impacts, zero for rigid motion",
+              ("beta",), "N s", (0.0, np.inf),
+              _term_columns("strain_rate_damping", [{"beta": 1.0}]), _scalar_term("strain_rate_damping", "beta")),
+    Candidate("body_friction", "friction",
+              "extra Coulomb friction -mu N t against the body: shoulders, waist and hips while sliding",
+              ("mu",), "1", (0.0, np.inf),
+              _term_columns("body_friction", [{"mu": 1.0}]), _friction_model),
+    Candidate("anisotropic_stretch", "anisotropy",
+              "extra stiffness along the warp (template vertical) and weft yarns: tension regions, bias cuts",
+              ("k_warp", "k_weft"), "Pa", (0.0, np.inf),
+              _term_columns("anisotropic_stretch", [{"k_warp": 1.0, "k_weft": 0.0}, {"k_warp": 0.0, "k_weft": 1.0}]),
+              _anisotropy_model),
+    Candidate("strain_stiffening", "stiffening",
+              "J-shaped stiffening V k tr(E^2)^2 of the membrane: load peaks, unlike a stiffer linear mu",
+              ("k",), "Pa", (0.0, np.inf),
+              _term_columns("strain_stiffening", [{"k": 1.0}]), _scalar_term("strain_stiffening", "k")),
+    Candidate("gravity_offset", "gravity",
+              "tilted gravity, a uniform horizontal acceleration m dg: everywhere, constant, not gated by n (its "
+              "vertical part is confounded with the rest frame's prestress and left to the nuisance fit)",
+              ("delta_g_x", "delta_g_z"), "m/s^2", (-np.inf, np.inf),
+              _term_columns("gravity_offset", [{"delta_g": (1.0, 0.0, 0.0)}, {"delta_g": (0.0, 0.0, 1.0)}]),
+              lambda c, ctx: ModelChange({"gravity_offset": {"delta_g": (float(c[0]), 0.0, float(c[1]))}},
+                                         ("gravity_offset.delta_g",))),
+    Candidate("heavy_region", "heavy_region",
+              "a heavier region (relative density increase s): static sag and inertial lag on that region",
+              ("density_change",), "1", (-0.9, 10.0), _region_columns(("density",)), _region_model(("density",)),
+              needs_region=True),
+    Candidate("region_stiffness", "region_stiffness",
+              "a stiffer (or softer) region: relative change of its stretch and bending stiffness",
+              ("stretch_change", "bending_change"), "1", (-0.9, 200.0), _region_columns(("stretch", "bending")),
+              _region_model(("stretch", "bending")), needs_region=True),
+    Candidate("rest_length_region", "rest_length",
+              "rest lengths changed on a region (tight seam, elastic band): static tension along a curve",
+              ("rest_length_change",), "1", (-0.5, 0.5), _region_columns(("rest",)), _region_model(("rest",)),
+              needs_region=True),
+)
+BY_NAME: dict[str, Candidate] = {c.name: c for c in CANDIDATES}

@@ -1,0 +1,236 @@
+"""The diagnosis on loaded sequences: baseline, residual, localization, selection, confirmation (the stage,
+gg_core/stages/diagnose.py, handles files, resuming and outputs)."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..jobs import Progress
+from ..physics.cloth import Cloth
+from ..physics.contact import BodyCollider
+from ..physics.fitting import BehaviorParams, FitConfig, Observed, fit_behavior, rollout_error
+from ..physics.forces import DEFAULT_TERMS, make_terms
+from ..physics.simulator import ImplicitSimulator
+from .confirm import Trial, trial
+from .features import FEATURES, state_features
+from .library import BY_NAME, CANDIDATES, Candidate, Context
+from .localize import Localization, localize
+from .residuals import FrameBatch, Pooling, build_frames, make_pooling, nuisance_changes, residual, responses
+from .selection import Design, Selection, fit, gram, select
+
+if TYPE_CHECKING:
+    from ..stages.diagnose import DiagnoseRequest
+
+BASELINE_FIT = ("collision.margin",)
+
+
+@dataclass
+class Result:
+    localization: Localization
+    selection: Selection
+    trials: dict[str, Trial]
+    accepted: list[str]
+    heldout_before: float
+    heldout_after: float
+    baseline: dict[str, float]
+    nuisance: dict[str, float]
+    batch: FrameBatch
+    progress: Progress
+    reference: dict[str, Trial] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    def gain(self, t: Trial) -> float:
+        return 1.0 - t.heldout_l2 / self.heldout_before
+
+    def frame_curve(self, train: list[Observed]) -> dict:
+        loc = self.localization
+        out = {"unit": "m/s^2", "meaning": "mean over garment patches of the one-frame position error of the "
+               "fitted simulator over the frame time squared, after re-adjusting its global parameters",
+               "feature": {"name": loc.step_feature[0], "spearman": loc.step_feature[1]}, "sequences": {}}
+        for k, obs in enumerate(train):
+            idx = self.batch.sequence == k
+            out["sequences"][obs.name] = {"frames": (self.batch.frame[idx] + 1).tolist(),
+                                          "residual": loc.step_curve[idx].tolist()}
+        return out
+
+    def effects(self) -> list[dict]:
+        sel = self.selection
+        order = {n: i for i, n in enumerate(sel.order)}
+        names = sorted(sel.explained, key=lambda n: (order.get(n, len(order)), -sel.inclusion[n], -sel.explained[n]))
+        out = []
+        for n in names:
+            cand = BY_NAME[n]
+            t = self.trials.get(n)
+            out.append({
+                "name": n, "class": cand.equivalence, "description": cand.description, "unit": cand.unit,
+                "params": cand.params(sel.coefs[n]),
+                "refit": None if t is None else t.values,
+                "uncertainty": {"inclusion_probability": sel.inclusion[n],
+                                "interval_5_95": {c: sel.interval[n][k].tolist()
+                                                  for k, c in enumerate(cand.coefficients)}},
+                "evidence": {"explained": sel.explained[n], "selected": n in order,
+                             "where": self.localization.vertex_feature[0], "when": self.localization.step_feature[0],
+                             "region_vertices": int(self.localization.region.sum())
+                             if cand.needs_region and self.localization.region is not None else None},
+                "heldout_l2": None if t is None else t.heldout_l2,
+                "heldout_gain": None if t is None else self.gain(t),
+            })
+        return out
+
+    def summary(self) -> dict:
+        loc = self.localization
+        return {
+            "verdict": "missing" if self.accepted else "none",
+            "accepted": self.accepted,
+            "accepted_classes": [BY_NAME[n].equivalence for n in self.accepted],
+            "effects": self.effects(),
+            "heldout_l2_before": self.heldout_before,
+            "heldout_l2_after": self.heldout_after,
+            "heldout_gain": 1.0 - self.heldout_after / self.heldout_before,
+            "baseline": self.baseline,
+            "nuisance_adjustment": self.nuisance,
+            "selection": {"order": self.selection.order, "rss_after_nuisance": self.selection.rss_nuisance},
+            "localization": {"vertex_feature": {"name": loc.vertex_feature[0], "spearman": loc.vertex_feature[1],
+                                                "meaning": FEATURES.get(loc.vertex_feature[0], "")},
+                             "step_feature": {"name": loc.step_feature[0], "spearman": loc.step_feature[1],
+                                              "meaning": FEATURES.get(loc.step_feature[0], "")},
+                             "vertex_map_max": float(loc.vertex_map.max()),
+                             "vertex_map_median": float(np.median(loc.vertex_map[loc.vertex_map > 0])),
+                             "region_vertices": None if loc.region is None else np.flatnonzero(loc.region).tolist()},
+            "reference_trials": {n: {"heldout_l2": t.heldout_l2, "heldout_gain": self.gain(t), "refit": t.values}
+                                 for n, t in self.reference.items()},
+        }
+
+
+def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, body_faces: np.ndarray,
+              attached: np.ndarray, hands: np.ndarray | None, progress: Progress
+              ) -> tuple[ImplicitSimulator, BehaviorParams]:
+    collider = BodyCollider(body_faces, train[0].body.shape[1], exclude=hands)
+    cloth = Cloth(train[0].garment[0], faces, pinned=attached)
+    sim = ImplicitSimulator(cloth, terms=make_terms(DEFAULT_TERMS), collider=collider, fps=req.fps,
+                            substeps=req.substeps)
+    params, _ = fit_behavior(sim, train, FitConfig(global_iterations=req.baseline_iterations, local_iterations=0,
+                                                   max_samples=req.max_samples, seed=req.seed,
+                                                   term_params=BASELINE_FIT))
+    progress.step("baseline fitted (global parameters only)")
+    return sim, params
+
+
+def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed], faces: np.ndarray,
+             body_faces: np.ndarray, attached: np.ndarray, hands: np.ndarray | None,
+             reference_region: np.ndarray | None, progress: Progress) -> Result:
+    """Thresholds, iterations and reference candidates come from `req`; `hands` are body vertices that do not
+    collide, `reference_region` the region reference trials of region candidates use."""
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    sim, params = _baseline(req, train, faces, body_faces, attached, hands, progress)
+    baseline_l2 = float(np.mean([rollout_error(sim, obs, attached) for obs in heldout]))
+    timings["baseline_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    batch = build_frames(sim, train)
+    res = residual(sim, batch)
+    predicted = batch.x_next - res
+    labels, changes = nuisance_changes(sim, params)
+    nuisance = responses(sim, batch, predicted, changes)
+    pooling = make_pooling(sim, batch, seed=req.seed)
+    y, n_cols = pooling.rows(res), pooling.rows(nuisance).T
+    adjust, *_ = np.linalg.lstsq(n_cols, y, rcond=None)
+    adjusted = res - np.einsum("k,knvc->nvc", adjust, nuisance)
+    loc = localize(sim, pooling, adjusted, state_features(sim, batch, pooling))
+    progress.step("residual measured and localized")
+    timings["residual_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    ctx = Context.build(sim, batch, loc.region)
+    blocks = _candidate_rows(ctx, pooling, predicted, req.probe_acceleration)
+    progress.step("candidate responses")
+    design = Design(y, n_cols, blocks, pooling.groups())
+    sel = select(design, BY_NAME, req.min_explained, req.bootstrap, req.seed)
+    progress.step("selection with block bootstrap")
+    timings["selection_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    # the same refit without any candidate: trials are judged against equal optimization effort, so a gain cannot
+    # come from the baseline fit simply running longer
+    null = trial(sim, BASELINE_FIT, [], ctx, None, train, heldout, attached, req.refit_iterations, req.max_samples)
+    before = null.heldout_l2
+    progress.step(f"baseline refit: held-out L2 {baseline_l2 * 1e3:.1f} -> {before * 1e3:.1f} mm")
+    proposed = propose(sel, req.min_inclusion, req.min_explained, req.tie_ratio)[:req.max_trials]
+    trials = {}
+    for n in proposed:
+        trials[n] = trial(sim, BASELINE_FIT, [(BY_NAME[n], sel.alone[n])], ctx, loc.region, train, heldout,
+                          attached, req.refit_iterations, req.max_samples)
+        progress.step(f"trial {n}: held-out L2 {before * 1e3:.1f} -> {trials[n].heldout_l2 * 1e3:.1f} mm")
+    passing = sorted((n for n in proposed if 1.0 - trials[n].heldout_l2 / before >= req.min_gain),
+                     key=lambda n: trials[n].heldout_l2)
+    accepted, after = passing[:1], (trials[passing[0]].heldout_l2 if passing else before)
+    if len(passing) > 1 and BY_NAME[passing[0]].equivalence != BY_NAME[passing[1]].equivalence:
+        pair = fit(gram(design), passing[:2], BY_NAME).coefs
+        joint = trial(sim, BASELINE_FIT, [(BY_NAME[n], pair[n]) for n in passing[:2]], ctx, loc.region, train,
+                      heldout, attached, req.refit_iterations, req.max_samples)
+        trials["+".join(passing[:2])] = joint
+        if joint.heldout_l2 <= (1.0 - req.min_gain) * after:
+            accepted, after = passing[:2], joint.heldout_l2
+    timings["trials_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    reference = {}
+    for n in req.reference:
+        reference[n] = _reference_trial(BY_NAME[n], sim, batch, pooling, design, predicted, reference_region, req,
+                                        train, heldout, attached)
+        progress.step(f"reference trial {n}: held-out L2 {reference[n].heldout_l2 * 1e3:.1f} mm")
+    timings["reference_s"] = time.perf_counter() - t0
+    baseline = {k: v for k, v in params.global_values().items()}
+    baseline.update({f"{t.name}.{k}": float(t.params[k]) for t, k, _ in params.term_refs})
+    baseline["heldout_l2_global_fit"] = baseline_l2
+    return Result(loc, sel, trials, accepted, before, after, baseline, dict(zip(labels, adjust.tolist())), batch,
+                  progress, reference, timings)
+
+
+def propose(sel: Selection, min_inclusion: float, min_explained: float, tie_ratio: float) -> list[str]:
+    """Candidates worth a refit: those the forward selection chose with bootstrap inclusion >= `min_inclusion`,
+    then near-ties of the best one (alone, they explain at least `tie_ratio` of what it explains): when two
+    effects push the garment alike (wind pressure and a horizontal gravity tilt on a skirt), the regression on
+    one-frame errors cannot tell them apart reliably and held-out rollouts decide."""
+    chosen = [n for n in sel.order if sel.inclusion[n] >= min_inclusion]
+    if not chosen:
+        return []
+    floor = max(min_explained, tie_ratio * sel.explained[chosen[0]])
+    ties = sorted((n for n in sel.explained if n not in chosen and sel.explained[n] >= floor),
+                  key=lambda n: -sel.explained[n])
+    return chosen + ties
+
+
+def _candidate_rows(ctx: Context, pooling: Pooling, predicted: np.ndarray, acceleration: float
+                    ) -> dict[str, np.ndarray]:
+    """Pooled response columns [R,K] of every candidate that acts on these data (region candidates need a
+    region; a candidate whose force vanishes here, e.g. friction without contact, is left out)."""
+    blocks = {}
+    for cand in CANDIDATES:
+        if cand.needs_region and ctx.region is None:
+            continue
+        probes = cand.probes(ctx, acceleration)
+        if any(size == 0 for size, _ in probes):
+            continue
+        blocks[cand.name] = pooling.rows(responses(ctx.sim, ctx.batch, predicted, probes)).T
+    return blocks
+
+
+def _reference_trial(cand: Candidate, sim: ImplicitSimulator, batch: FrameBatch, pooling: Pooling, design: Design,
+                     predicted: np.ndarray, region: np.ndarray | None, req: DiagnoseRequest, train: list[Observed],
+                     heldout: list[Observed], attached: np.ndarray) -> Trial:
+    """A trial of `cand` whatever the selection said, on the given region (benchmarks: the true effect, on the
+    true region), started from its regression coefficients on that region (its probe sizes where those are 0)."""
+    ctx = Context.build(sim, batch, region if cand.needs_region else None)
+    probes = cand.probes(ctx, req.probe_acceleration)
+    rows = pooling.rows(responses(sim, batch, predicted, probes)).T
+    coefs = fit(gram(Design(design.y, design.nuisance, {cand.name: rows}, design.groups)), [cand.name], BY_NAME
+                ).coefs[cand.name]
+    sizes = np.array([size for size, _ in probes])
+    coefs = np.where(coefs != 0, coefs, sizes)
+    return trial(sim, BASELINE_FIT, [(cand, coefs)], ctx, ctx.region, train, heldout, attached,
+                 req.refit_iterations, req.max_samples)

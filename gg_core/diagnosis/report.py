@@ -1,0 +1,167 @@
+"""Human-readable diagnosis: a self-contained HTML page with the residual heat map on the garment (front and
+back), the residual-over-time plot, one sentence per accepted effect and the ranked candidate table. Images are
+drawn with Pillow (flat-shaded painter's algorithm) and embedded as PNG data URIs."""
+from __future__ import annotations
+
+import base64
+import html
+import io
+from pathlib import Path
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from ..storage import atomic_path
+
+# black-body ramp: dark purple -> red -> orange -> pale yellow (low -> high residual)
+_RAMP = np.array([[40, 20, 70], [150, 30, 70], [230, 90, 40], [250, 190, 60], [255, 250, 200]], np.float64)
+_LINE_COLORS = [(31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189), (255, 127, 14)]
+
+
+def ramp(values: np.ndarray, vmax: float) -> np.ndarray:
+    """[N] values -> [N,3] uint8 colours, linear in [0, vmax]."""
+    t = np.clip(values / max(vmax, 1e-30), 0, 1) * (len(_RAMP) - 1)
+    low = np.minimum(t.astype(int), len(_RAMP) - 2)
+    frac = (t - low)[:, None]
+    return ((1 - frac) * _RAMP[low] + frac * _RAMP[low + 1]).astype(np.uint8)
+
+
+def render_mesh(vertices: np.ndarray, faces: np.ndarray, values: np.ndarray, vmax: float, back: bool = False,
+                size: tuple[int, int] = (300, 400)) -> Image.Image:
+    """Orthographic view along -Z (front, the body's front faces +Z) or +Z (back), +Y up, faces filled with the
+    mean colour of their vertices and darkened by their slant, drawn far to near."""
+    sign = -1.0 if back else 1.0
+    xy = np.stack([sign * vertices[:, 0], -vertices[:, 1]], 1)
+    lo, hi = xy.min(0), xy.max(0)
+    scale = 0.9 * min(size[0] / max(hi[0] - lo[0], 1e-9), size[1] / max(hi[1] - lo[1], 1e-9))
+    px = (xy - (lo + hi) / 2) * scale + np.array(size) / 2
+    tri = vertices[faces]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    shade = 0.45 + 0.55 * np.abs(normal[:, 2])
+    colors = ramp(values[faces].mean(1), vmax) * shade[:, None]
+    image = Image.new("RGB", size, (255, 255, 255))
+    draw = ImageDraw.Draw(image)
+    for f in np.argsort(sign * tri[:, :, 2].mean(1)):
+        draw.polygon([tuple(p) for p in px[faces[f]]], fill=tuple(int(c) for c in colors[f]))
+    return image
+
+
+def colorbar(vmax: float, unit: str, size: tuple[int, int] = (300, 40)) -> Image.Image:
+    image = Image.new("RGB", size, (255, 255, 255))
+    strip = ramp(np.linspace(0, vmax, size[0] - 20), vmax)
+    draw = ImageDraw.Draw(image)
+    for i, c in enumerate(strip):
+        draw.line([(10 + i, 4), (10 + i, 18)], fill=tuple(int(v) for v in c))
+    draw.text((10, 22), "0", fill=(0, 0, 0))
+    label = f"{vmax:.3g} {unit}"
+    draw.text((size[0] - 10 - 6 * len(label), 22), label, fill=(0, 0, 0))
+    return image
+
+
+def plot_curves(curves: dict[str, tuple[list[int], list[float]]], unit: str,
+                size: tuple[int, int] = (640, 300)) -> Image.Image:
+    """Line plot of residual per frame, one line per sequence, with axis labels."""
+    image = Image.new("RGB", size, (255, 255, 255))
+    draw = ImageDraw.Draw(image)
+    left, right, top, bottom = 60, 20, 20, 40
+    frames = [f for fr, _ in curves.values() for f in fr]
+    values = [v for _, vs in curves.values() for v in vs]
+    if not frames:
+        return image
+    f0, f1 = min(frames), max(max(frames), min(frames) + 1)
+    vmax = max(max(values), 1e-30) * 1.1
+    w, h = size[0] - left - right, size[1] - top - bottom
+
+    def to_px(f: float, v: float) -> tuple[float, float]:
+        return left + (f - f0) / (f1 - f0) * w, top + h - v / vmax * h
+
+    draw.rectangle([left, top, left + w, top + h], outline=(0, 0, 0))
+    for k in range(5):
+        v = vmax * k / 4
+        draw.text((4, to_px(f0, v)[1] - 6), f"{v:.2g}", fill=(0, 0, 0))
+    draw.text((left + w // 2 - 20, size[1] - 18), "frame", fill=(0, 0, 0))
+    for f in (f0, (f0 + f1) // 2, f1):
+        draw.text((to_px(f, 0)[0] - 6, top + h + 4), str(f), fill=(0, 0, 0))
+    draw.text((left + 4, top + 2), unit, fill=(0, 0, 0))
+    for k, (name, (fr, vs)) in enumerate(curves.items()):
+        color = _LINE_COLORS[k % len(_LINE_COLORS)]
+        draw.line([to_px(f, v) for f, v in zip(fr, vs)], fill=color, width=2)
+        draw.text((left + w - 150, top + 6 + 14 * k), name, fill=color)
+    return image
+
+
+def _png(image: Image.Image) -> str:
+    buffer = io.BytesIO()
+    image.save(buffer, format="PNG")
+    return "data:image/png;base64," + base64.b64encode(buffer.getvalue()).decode()
+
+
+def sentence(effect: dict, before: float) -> str:
+    """One sentence: what was missing, how strong, where and when it shows, how much adding it helps."""
+    values = effect["refit"] or {}
+    params = ", ".join(f"{k} = {_fmt(v)}" for k, v in values.items() if not k.startswith("material."))
+    return (f"Missing {effect['name'].replace('_', ' ')} ({effect['class'].replace('_', ' ')}): "
+            f"{effect['description']}; refitted {params}. The residual it explains is largest where "
+            f"{effect['evidence']['where'].replace('_', ' ')} is high and in frames with high "
+            f"{effect['evidence']['when'].replace('_', ' ')}. Adding it lowers the held-out rollout error from "
+            f"{before * 1e3:.1f} mm to {effect['heldout_l2'] * 1e3:.1f} mm ({effect['heldout_gain']:+.0%} gain).")
+
+
+def _fmt(value: object) -> str:
+    if isinstance(value, list):
+        return "(" + ", ".join(f"{v:.3g}" for v in value) + ")"
+    return f"{value:.3g}" if isinstance(value, float) else str(value)
+
+
+def write_html(path: Path, report: dict, vertices: np.ndarray, faces: np.ndarray, vertex_map: np.ndarray) -> Path:
+    vmax = float(np.percentile(vertex_map[vertex_map > 0], 99)) if (vertex_map > 0).any() else 1.0
+    front = _png(render_mesh(vertices, faces, vertex_map, vmax))
+    back = _png(render_mesh(vertices, faces, vertex_map, vmax, back=True))
+    bar = _png(colorbar(vmax, "m/s^2"))
+    curve_json = report.get("outputs", {}).get("residual_frame")
+    curves = {}
+    if curve_json and Path(curve_json).is_file():
+        import json  # noqa: PLC0415
+
+        data = json.loads(Path(curve_json).read_text())
+        curves = {n: (s["frames"], s["residual"]) for n, s in data["sequences"].items()}
+    plot = _png(plot_curves(curves, "m/s^2"))
+    by_name = {e["name"]: e for e in report["effects"]}
+    before, after = report["heldout_l2_before"], report["heldout_l2_after"]
+    if report["accepted"]:
+        verdict = "".join(f"<p>{html.escape(sentence(by_name[n], before))}</p>" for n in report["accepted"]
+                          if n in by_name and by_name[n]["heldout_l2"] is not None)
+        if len(report["accepted"]) > 1:
+            verdict += f"<p>Together: held-out rollout error {before * 1e3:.1f} mm to {after * 1e3:.1f} mm.</p>"
+    else:
+        verdict = (f"<p>Nothing missing: no candidate effect both explained a clear share of the residual and "
+                   f"lowered the held-out rollout error by the required margin (baseline {before * 1e3:.1f} mm).</p>")
+    loc = report["localization"]
+    rows = "".join(
+        f"<tr><td>{html.escape(e['name'])}</td><td>{html.escape(e['class'])}</td><td>{e['evidence']['explained']:.1%}"
+        f"</td><td>{e['uncertainty']['inclusion_probability']:.0%}</td><td>{html.escape(_fmt_params(e))}</td>"
+        f"<td>{'' if e['heldout_gain'] is None else format(e['heldout_gain'], '+.0%')}</td></tr>"
+        for e in report["effects"])
+    page = f"""<!doctype html><html><head><meta charset="utf-8"><title>Missing-physics diagnosis</title>
+<style>body{{font-family:sans-serif;max-width:980px;margin:2em auto}}
+td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc}}</style></head><body>
+<h1>Missing-physics diagnosis: verdict <em>{html.escape(report['verdict'])}</em></h1>{verdict}
+<h2>Where: residual on the garment</h2>
+<p>Front and back; colour = residual acceleration after re-fitting the global material (best-correlated state:
+{html.escape(loc['vertex_feature']['meaning'] or loc['vertex_feature']['name'])}, Spearman
+{loc['vertex_feature']['spearman']:.2f}).</p>
+<img src="{front}" alt="front"> <img src="{back}" alt="back"><br><img src="{bar}" alt="colour scale">
+<h2>When: residual over time</h2>
+<p>Best-correlated state: {html.escape(loc['step_feature']['meaning'] or loc['step_feature']['name'])}, Spearman
+{loc['step_feature']['spearman']:.2f}.</p><img src="{plot}" alt="residual over time">
+<h2>Candidates</h2><table><tr><th>candidate</th><th>class</th><th>explained</th><th>bootstrap inclusion</th>
+<th>coefficients (regression)</th><th>held-out gain</th></tr>{rows}</table>
+<p>Held-out rollout error: {before * 1e3:.2f} mm before, {after * 1e3:.2f} mm after.</p></body></html>"""
+    with atomic_path(path) as tmp:
+        tmp.write_text(page)
+    return Path(path)
+
+
+def _fmt_params(effect: dict) -> str:
+    return ", ".join(f"{k} {v:.3g}" for k, v in effect["params"].items()) + f" {effect['unit']}"

@@ -1,0 +1,164 @@
+"""Diagnosis: find where and when the fitted simulator misses the observed motion, name the missing physics, add
+it through the force library, refit, and show the held-out rollout error before and after.
+
+1. Baseline: the behaviour fit with global parameters only (material, contact margin; per-vertex fields could
+   silently absorb a missing effect), rest shape = the first training frame.
+2. Residual: the one-frame position error of the simulator's own step on the training sequences, pooled in the
+   weak form, after re-adjusting the global parameters to it (gg_core/diagnosis/residuals.py).
+3. Localization: per-vertex map, per-frame curve, their best-correlated state features, the standout region.
+4. Selection: forward sparse regression on the candidate library with a moving-block bootstrap.
+5. Confirmation: each proposed candidate is added to the simulator and refitted; it is accepted only if the
+   held-out rollout error drops by at least `min_gain`.
+
+Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply, `--source registered`) or, for synthetic captures,
+the ground-truth meshes (`--source gt`), optionally with spatially correlated noise. truth.json is read only for
+the train / held-out split the behaviour stage uses.
+
+Outputs: P/reports/diagnose.json, P/reports/diagnose.html, P/diagnose/residual_vertex.npy ([V], m/s^2),
+P/diagnose/residual_frame.json, P/diagnose/template.ply (the mesh the vertex map refers to).
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..capture.layout import Capture, Sequence
+from ..errors import InputError
+from ..geometry.meshio import write_ply
+from ..jobs import Progress
+from ..storage import atomic_path, write_json, write_report
+from .behavior import attached_vertices, hand_mask, load_sequence, split
+
+STAGE = "diagnose"
+SOURCES = ("gt", "registered")
+
+
+@dataclass
+class DiagnoseRequest:
+    capture: Path
+    project: Path
+    source: str = "gt"
+    train: list[str] = field(default_factory=list)
+    heldout: list[str] = field(default_factory=list)
+    noise_mm: float = 0.0              # spatially correlated noise added to the garment meshes (std, mm)
+    noise_length_mm: float = 50.0      # its correlation length
+    attach_tol_mm: float = 3.0
+    fps: float = 30.0
+    substeps: int = 2
+    seed: int = 0
+    baseline_iterations: int = 15      # L-BFGS iterations of the global baseline fit
+    refit_iterations: int = 8          # of each confirming refit (warm-started)
+    max_samples: int | None = 24       # teacher-forced frames per fit evaluation
+    probe_acceleration: float = 0.5    # m/s^2: size of the model changes whose responses form the regression
+    min_explained: float = 0.05        # share of the residual a selected candidate must explain
+    min_inclusion: float = 0.5         # bootstrap inclusion probability a candidate needs to be tried
+    tie_ratio: float = 0.5             # unselected candidates explaining this share of the best one's are tried too
+    min_gain: float = 0.10             # relative held-out rollout improvement needed to accept
+    max_trials: int = 3
+    bootstrap: int = 100
+    reference: list[str] = field(default_factory=list)   # candidates always trialled (benchmarks), never accepted
+    reference_region: str = ""         # .npy of [V] weights for region candidates in reference trials
+    progress: str = "bar"
+
+
+def mesh_files(seq: Sequence, source: str, project: Path) -> dict[str, Path]:
+    if source == "gt":
+        return seq.gt_garment_files
+    folder = Path(project) / "stage2" / seq.name / "meshes"
+    return {p.stem: p for p in sorted(folder.glob("*.ply"))} if folder.is_dir() else {}
+
+
+@dataclass
+class _MeshView:
+    """A sequence whose garment meshes come from `files` (registered or ground truth), for load_sequence."""
+
+    root: Path
+    name: str
+    gt_garment_files: dict[str, Path]
+    body_files: dict[str, Path]
+
+
+def load(req: DiagnoseRequest, capture: Capture, names: list[str]) -> dict:
+    rng = np.random.default_rng(req.seed)
+    out = {}
+    for n in names:
+        seq = capture.sequence(n)
+        files = mesh_files(seq, req.source, req.project)
+        if not files:
+            where = seq.root / "gt" / "garment" if req.source == "gt" else Path(req.project) / "stage2" / n / "meshes"
+            raise InputError(f"no {req.source} garment meshes for sequence '{n}'", where,
+                             "run registration first (gg register), or use --source gt on a synthetic capture")
+        obs, faces, body_faces = load_sequence(_MeshView(seq.root, n, files, seq.body_files), 0.0, rng, req.fps)
+        if req.noise_mm > 0:
+            from ..diagnosis.noise import correlated_noise  # noqa: PLC0415 - scipy only when asked for
+
+            obs.garment = obs.garment + correlated_noise(obs.garment[0], req.noise_mm * 1e-3,
+                                                         req.noise_length_mm * 1e-3, len(obs.garment), rng)
+        out[n] = (obs, faces, body_faces)
+    return out
+
+
+def inputs_key(req: DiagnoseRequest, capture: Capture, names: list[str]) -> dict:
+    files = {}
+    for n in names:
+        seq = capture.sequence(n)
+        for kind, group in (("garment", mesh_files(seq, req.source, req.project)), ("body", seq.body_files)):
+            files[f"{n}/{kind}"] = [[p.name, p.stat().st_size, p.stat().st_mtime_ns] for p in group.values()]
+    options = {k: v for k, v in asdict(req).items() if k not in ("project", "progress")}
+    return json.loads(json.dumps({"options": options, "files": files}, default=str))
+
+
+def run_diagnose(req: DiagnoseRequest) -> Path:
+    if req.source not in SOURCES:
+        raise InputError(f"unknown source '{req.source}'", "--source", f"choose one of: {', '.join(SOURCES)}")
+    start = time.perf_counter()
+    capture = Capture(req.capture)
+    train_names, heldout_names = split(capture, list(req.train), list(req.heldout))
+    if not heldout_names:
+        raise InputError("no held-out sequence to confirm effects on", capture.root,
+                         "pass --heldout, or give the capture at least two sequences")
+    project = Path(req.project)
+    report_path = project / "reports" / f"{STAGE}.json"
+    key = inputs_key(req, capture, train_names + heldout_names)
+    if report_path.is_file() and json.loads(report_path.read_text()).get("inputs") == key:
+        Progress(STAGE, 1, req.progress).done(str(report_path))   # unchanged inputs: keep the finished result
+        return report_path
+
+    from ..diagnosis.pipeline import diagnose  # noqa: PLC0415 - torch only when the stage runs
+    from ..diagnosis.report import write_html  # noqa: PLC0415
+
+    loaded = load(req, capture, train_names + heldout_names)
+    train = [loaded[n][0] for n in train_names]
+    heldout = [loaded[n][0] for n in heldout_names]
+    faces, body_faces = loaded[train_names[0]][1], loaded[train_names[0]][2]
+    # noise moves attached vertices too: widen the tolerance by four standard deviations
+    attached = attached_vertices(train, body_faces, (req.attach_tol_mm + 4 * req.noise_mm) * 1e-3)
+    reference_region = np.load(req.reference_region) if req.reference_region else None
+    result = diagnose(req, train, heldout, faces, body_faces, attached, hand_mask(train[0].body.shape[1]),
+                      reference_region, Progress(STAGE, 9 + req.max_trials + len(req.reference), req.progress))
+
+    out = project / "diagnose"
+    with atomic_path(out / "residual_vertex.npy") as tmp:
+        np.save(tmp, result.localization.vertex_map.astype(np.float32))
+    write_json(out / "residual_frame.json", result.frame_curve(train))
+    write_ply(out / "template.ply", train[0].garment[0], faces)
+    payload = result.summary()
+    payload.update({
+        "train_sequences": train_names, "heldout_sequences": heldout_names, "source": req.source,
+        "noise_mm": req.noise_mm, "vertices": len(train[0].garment[0]), "attached_vertices": int(attached.sum()),
+        "outputs": {"residual_vertex": str(out / "residual_vertex.npy"),
+                    "residual_vertex_unit": "m/s^2 (one-frame position error over the frame time squared)",
+                    "residual_frame": str(out / "residual_frame.json"), "template": str(out / "template.ply"),
+                    "html": str(project / "reports" / f"{STAGE}.html")},
+        "inputs": key,
+        "timings": {**result.timings, "total_s": time.perf_counter() - start},
+    })
+    report = write_report(project, STAGE, payload)
+    write_html(project / "reports" / f"{STAGE}.html", json.loads(report.read_text()), train[0].garment[0], faces,
+               result.localization.vertex_map)
+    result.progress.done(str(report))
+    return report

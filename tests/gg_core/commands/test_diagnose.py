@@ -1,0 +1,66 @@
+"""`gg diagnose` and `gg bench diagnose`: command line contract (errors, output line) and the benchmark's scoring
+(strength scaling, truth parameters in our units, parameter errors, confusion table, summary)."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "diagnosis"))
+sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
+
+from diagnosis_helpers import write_sim_capture  # noqa: E402
+
+from gg_core.cli import main  # noqa: E402
+from gg_core.commands.bench_diagnose import (confusion, effect_params, parameter_error, summarize,  # noqa: E402
+                                             truth_parameters)
+
+
+def test_diagnose_refuses_a_missing_capture_with_one_line(tmp_path, capsys):
+    assert main(["diagnose", str(tmp_path / "nowhere"), "--project", str(tmp_path / "p")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("gg: error: capture folder not found")
+
+
+def test_diagnose_command_prints_the_verdict(tmp_path, capsys):
+    capture = write_sim_capture(tmp_path / "capture", n_frames=10)
+    code = main(["diagnose", str(capture), "--project", str(tmp_path / "p"), "--substeps", "1",
+                 "--baseline-iterations", "3", "--refit-iterations", "2", "--bootstrap", "10", "--progress", "none"])
+    assert code == 0
+    line = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert line["verdict"] in ("none", "missing") and line["report"].endswith("diagnose.json")
+    assert (tmp_path / "p" / "reports" / "diagnose.html").is_file()
+
+
+def test_bench_scoring():
+    assert effect_params("wind", 0.5) == ["strength=500"]
+    assert effect_params("air_drag", 1.0) == ["air_damping=10"]
+    assert effect_params("none", 1.0) == []
+    truth = {"effect": {"name": "gravity", "params": {"scale": 1.25, "tilt_deg": 12.0}},
+             "material": {"gravity": [2.55, -12.0, 0.0]}}
+    params = truth_parameters(truth)
+    assert params == {"gravity_offset.delta_g": [2.55, 0.0]}
+    assert parameter_error(params, {"gravity_offset.delta_g": [2.04, 0.3, 0.0]}) == pytest.approx(0.2)
+    shrink = truth_parameters({"effect": {"name": "shrink", "params": {"factor": 0.15}}})
+    assert parameter_error(shrink, {"region.rest_scale": 0.88}) == pytest.approx(0.2)
+    assert parameter_error(shrink, None) is None
+    drag = truth_parameters({"effect": {"name": "air_drag", "params": {"air_damping": 10.0}},
+                             "material": {"blender_cloth": {"mass": 0.3}}, "preset": {"fps": 30}})
+    assert drag == {"mass_damping.alpha": pytest.approx(10.0)}
+    assert parameter_error(drag, {"mass_damping.alpha": 11.0}) == pytest.approx(0.1)
+    cases = [{"true_class": "none", "predicted": "none", "correct": True, "heldout_gain": 0.0, "gap_closed": None,
+              "parameter_error": None},
+             {"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
+              "gap_closed": 0.9, "parameter_error": 0.1},
+             {"true_class": "wind", "predicted": "gravity", "correct": False, "heldout_gain": 0.1,
+              "gap_closed": 0.3, "parameter_error": None}]
+    summary = summarize(cases)
+    assert summary["accuracy_effect_present"] == 0.5 and summary["false_alarm_rate_none"] == 0.0
+    assert summary["median_parameter_error"] == pytest.approx(0.1) and summary["median_gap_closed"] == 0.6
+    table = confusion(cases).splitlines()
+    assert table[0].split()[-3:] == ["gravity", "none", "wind"]
+    assert [int(v) for v in table[-1].split()[1:]] == [1, 0, 0]      # wind named gravity
+    assert np.isfinite(summary["mean_heldout_gain_when_named"])

@@ -1,0 +1,57 @@
+"""Test helpers of the diagnosis tests: captures simulated by our own simulator with a known extra force (fast,
+exact physics): a sheet hanging from two corners attached to a swaying sphere 'body', written in the capture
+layout (ground-truth meshes only)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
+
+from physics_helpers import sheet, uv_sphere  # noqa: E402
+
+from gg_core.geometry.meshio import write_ply  # noqa: E402
+from gg_core.physics.cloth import Cloth  # noqa: E402
+from gg_core.physics.forces import make_terms  # noqa: E402
+from gg_core.physics.material import Material  # noqa: E402
+from gg_core.physics.simulator import ClothState, ImplicitSimulator  # noqa: E402
+from gg_core.storage import write_json  # noqa: E402
+
+MATERIAL = {"density": 0.3, "mu": 40000.0, "lam": 20000.0, "bending": 4e-4}
+SEQUENCES = {"a": (0.08, 1.3), "b": (0.12, 0.9), "c": (0.1, 1.1)}   # sway amplitude (m), frequency (Hz)
+
+
+def hanging_sheet() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices, faces, pinned): a 0.3 m sheet in the XY plane, its two top corners pinned."""
+    v, f = sheet(6, 6, 0.3, 0.3)
+    v = v[:, [0, 2, 1]] + [0.0, 0.7, 0.0]
+    top = np.flatnonzero(np.isclose(v[:, 1], v[:, 1].max()))
+    pinned = np.zeros(len(v), bool)
+    pinned[[top[0], top[-1]]] = True
+    return v, f, pinned
+
+
+def write_sim_capture(root: Path, extra: dict[str, dict] | None = None, n_frames: int = 16) -> Path:
+    """Sequences a, b (train) and c (held out) of the sheet simulated with the base terms plus `extra`."""
+    extra = extra or {}
+    bv, bf = uv_sphere(0.1, 12, 24, center=(0.0, 1.0, 0.0))
+    v, f, pinned = hanging_sheet()
+    cloth = Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **MATERIAL))
+    terms = make_terms(["gravity", "stretching", "bending"] + list(extra), extra)
+    for name, (amp, freq) in SEQUENCES.items():
+        t = np.arange(n_frames) / 30
+        shift = np.zeros((n_frames, 3))
+        shift[:, 0] = amp * np.sin(2 * np.pi * freq * t)
+        shift[:, 2] = 0.5 * amp * (1 - np.cos(2 * np.pi * freq * t))
+        body = bv[None] + shift[:, None]
+        traj = ImplicitSimulator(cloth, terms=terms).rollout(ClothState(v.copy(), np.zeros_like(v)), None,
+                                                            n_frames=n_frames, pin_frames=v[None] + shift[:, None])
+        (root / name).mkdir(parents=True)
+        (root / name / "cameras.json").write_text("{}")
+        for k in range(n_frames):
+            write_ply(root / name / "gt" / "garment" / f"{k:06d}.ply", traj[k], f)
+            write_ply(root / name / "body" / f"{k:06d}.ply", body[k], bf)
+    write_json(root / "truth.json", {"split": {"train_sequences": ["a", "b"], "heldout_sequences": ["c"]}})
+    return root

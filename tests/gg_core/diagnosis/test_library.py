@@ -1,0 +1,73 @@
+"""The candidate library: enough physically named effects with declared equivalence classes, and each
+candidate's force per unit coefficient is exactly what its model change does to the simulator."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from physics_helpers import random_cloth, random_step
+
+from gg_core.diagnosis.library import BY_NAME, CANDIDATES, SYNTH_EFFECT_CLASS, Context, applied
+from gg_core.diagnosis.residuals import FrameBatch
+from gg_core.physics.forces import DEFAULT_TERMS, WindPressure, make_terms
+from gg_core.physics.simulator import ImplicitSimulator
+from gg_core.physics.terms import System
+from gg_core.synth.effects import EFFECTS
+
+
+def test_library_names_at_least_eight_effects_with_equivalence_classes():
+    assert len(CANDIDATES) >= 8 and len(BY_NAME) == len(CANDIDATES)
+    for cand in CANDIDATES:
+        assert cand.equivalence and len(cand.description) > 30 and cand.coefficients
+        assert cand.bounds[0] < cand.bounds[1]
+    classes = {c.equivalence for c in CANDIDATES}
+    assert set(SYNTH_EFFECT_CLASS) == set(EFFECTS)             # every hidden effect of gg synth has an answer
+    assert set(SYNTH_EFFECT_CLASS.values()) - {"none"} <= classes
+
+
+@pytest.fixture
+def context() -> Context:
+    cloth = random_cloth()
+    rng = np.random.default_rng(3)
+    x_prev = cloth.template + rng.normal(0, 0.01, cloth.template.shape)
+    step = random_step(cloth, x_prev)
+    sim = ImplicitSimulator(cloth, terms=make_terms(DEFAULT_TERMS))
+    x_next = x_prev + step.dt * step.v_prev + rng.normal(0, 0.003, x_prev.shape)
+    batch = FrameBatch([step], [(None, None)], x_next[None], np.zeros(1, int), np.ones(1, int), ["s"], step.dt)
+    region = np.zeros(cloth.n_vertices)
+    region[: cloth.n_vertices // 3] = 1.0
+    return Context.build(sim, batch, region)
+
+
+@pytest.mark.parametrize("name", [c.name for c in CANDIDATES])
+def test_columns_are_the_force_of_the_model_change(context, name):
+    """(force with the candidate at coefficient h e_k - force without) / h == column k, for every coefficient."""
+    cand = BY_NAME[name]
+    sim = context.sim
+    base = context.force(sim.terms)
+    columns = cand.columns(context)
+    assert columns.shape == (len(cand.coefficients),) + base.shape
+    h = 1e-5
+    for k in range(len(cand.coefficients)):
+        with applied(sim, cand.model(np.eye(len(cand.coefficients))[k] * h, context), context.region):
+            changed = Context.build(sim, context.batch, context.region).force(sim.terms)
+        assert np.abs(columns[k]).max() > 0
+        assert (changed - base) / h == pytest.approx(columns[k], rel=1e-3, abs=1e-6 * np.abs(columns[k]).max())
+    assert np.allclose(context.force(sim.terms), base)     # applied() restored the simulator
+
+
+def test_wind_pressure_term_assembles_its_energy_gradient(context):
+    """The force-library term the wind candidate adds: the solver's gradient equals the torch energy's."""
+    sim, step = context.sim, context.batch.steps[0]
+    term = WindPressure(pressure=(3.0, -1.0, 2.0))
+    x = context.batch.x_next[0]
+    system = System(sim.num)
+    energy = term.assemble(x, step, sim.num, system)
+    xt = torch.tensor(x, requires_grad=True)
+    torch_energy = term.energy(xt, step.to_torch(), context.rest)
+    (grad,) = torch.autograd.grad(torch_energy, xt)
+    assert energy == pytest.approx(float(torch_energy.detach()))
+    assert np.allclose(system.grad, grad.numpy())
+    normals = step.normal_prev
+    expected = (sim.num.vertex_area * (normals @ np.array([3.0, -1.0, 2.0])))[:, None] * normals
+    assert np.allclose(-system.grad, expected)                 # force A (n.w) n

@@ -1,0 +1,48 @@
+"""The HTML report: a heat map that really colours the hot vertices, a time plot, one sentence per effect."""
+from __future__ import annotations
+
+import base64
+import io
+import re
+
+import numpy as np
+from PIL import Image
+from physics_helpers import sheet
+
+from gg_core.diagnosis.report import plot_curves, render_mesh, sentence, write_html
+
+EFFECT = {"name": "gravity_offset", "class": "gravity", "description": "tilted gravity", "unit": "m/s^2",
+          "params": {"delta_g_x": 2.0, "delta_g_z": 0.0},
+          "refit": {"material.density": 0.2, "gravity_offset.delta_g": [2.1, 0.0, 0.1]},
+          "uncertainty": {"inclusion_probability": 0.97, "interval_5_95": {}},
+          "evidence": {"explained": 0.4, "where": "height", "when": "speed"},
+          "heldout_l2": 0.006, "heldout_gain": 0.5}
+
+
+def test_heat_map_is_hot_where_the_values_are():
+    v, f = sheet(10, 10, 0.5, 0.5)
+    v = v[:, [0, 2, 1]]                                     # facing the camera (normal along Z)
+    values = (v[:, 0] > 0).astype(float)                    # right half hot
+    image = np.asarray(render_mesh(v, f, values, 1.0, size=(200, 200))).astype(float)
+    left, right = image[80:120, 40:80].mean((0, 1)), image[80:120, 120:160].mean((0, 1))
+    assert right.sum() > left.sum() + 200                   # bright yellow vs dark purple
+    back = np.asarray(render_mesh(v, f, values, 1.0, back=True, size=(200, 200))).astype(float)
+    assert back[80:120, 40:80].mean((0, 1)).sum() > back[80:120, 120:160].mean((0, 1)).sum() + 200   # mirrored
+    plot = plot_curves({"a": ([1, 2, 3], [0.1, 0.3, 0.2])}, "m/s^2")
+    assert plot.size == (640, 300)
+
+
+def test_sentence_and_page(tmp_path):
+    text = sentence(EFFECT, 0.012)
+    assert "12.0 mm to 6.0 mm" in text and "+50% gain" in text and "gravity_offset.delta_g = (2.1, 0, 0.1)" in text
+    assert "material" not in text
+    v, f = sheet(4, 4, 0.5, 0.5)
+    report = {"verdict": "missing", "accepted": ["gravity_offset"], "effects": [EFFECT],
+              "heldout_l2_before": 0.012, "heldout_l2_after": 0.006, "outputs": {},
+              "localization": {"vertex_feature": {"name": "height", "spearman": 0.5, "meaning": "height"},
+                               "step_feature": {"name": "speed", "spearman": 0.4, "meaning": "speed |v|"}}}
+    page = write_html(tmp_path / "d.html", report, v, f, np.linspace(0, 1, len(v))).read_text()
+    assert "verdict <em>missing</em>" in page and text.split(":")[0] in page
+    images = re.findall(r'src="data:image/png;base64,([^"]+)"', page)
+    assert len(images) == 4
+    assert Image.open(io.BytesIO(base64.b64decode(images[0]))).size == (300, 400)
