@@ -10,6 +10,8 @@ HELP = "benchmarks (JSON output): each compares the product's fast path with a b
 BENCHES: dict[str, str] = {
     "raster": "bench_raster",
     "sim": "bench_sim",
+    "register": "bench_register",
+    "diagnose": "bench_diagnose",
 }
 
 

@@ -1,7 +1,8 @@
 """`gg demo`: the main job on embedded default data, end to end, resumable.
 
 Generates the synthetic demo capture (Blender cloth + Cycles; the body model and garment templates ship with
-the package, nothing is downloaded), validates it, and fits the behaviour stage on its ground-truth motion.
+the package, nothing is downloaded), validates it, reconstructs the template (stage 1), registers every frame
+(stage 2), fits the behaviour stage and runs the missing-physics diagnosis on the capture's motion.
 Each step is a regular `gg` command, so a re-run skips what is already finished. Writes <out>/reports/demo.json
 with the steps, their reports and timings.
 """
@@ -13,7 +14,7 @@ from pathlib import Path
 
 from ..cli import add_progress_option
 
-HELP = "run the main job on embedded default data: synthesize a capture, inspect it, fit behaviour"
+HELP = "run the main job on embedded default data: synthesize a capture, template, registration, behaviour, diagnosis"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
@@ -31,8 +32,14 @@ def steps(args: argparse.Namespace) -> list[tuple[str, list[str], Path | None]]:
         ("synth", ["synth", "--preset", args.preset, "--garment", args.garment, "--out", str(capture), *progress],
          capture / "truth.json"),
         ("inspect", ["inspect", str(capture), "--quick", "--progress", "none"], None),
+        ("template", ["template", str(capture), "--project", str(project), *progress],
+         project / "reports" / "template.json"),
+        ("register", ["register", str(capture), "--project", str(project), *progress],
+         project / "reports" / "register.json"),
         ("behavior", ["behavior", str(capture), "--project", str(project), *progress],
          project / "reports" / "behavior.json"),
+        ("diagnose", ["diagnose", str(capture), "--project", str(project), *progress],
+         project / "reports" / "diagnose.json"),
     ]
 
 
