@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from ..physics.cloth import Cloth
-from ..physics.fitting import BehaviorParams, Observed, TeacherForced, rollout_error
+from ..physics.fitting import BehaviorParams, Observed, TeacherForced, minimize_lbfgs, rollout_error
 from ..physics.material import MATERIAL_NAMES
 from ..physics.simulator import ImplicitSimulator
 from .library import Candidate, Context, ModelChange, apply_region, with_terms
@@ -73,27 +73,14 @@ def refit(sim: ImplicitSimulator, params: BehaviorParams, train: list[Observed],
           iterations: int, max_samples: int | None, seed: int = 0) -> float:
     """L-BFGS on the teacher-forced loss over `trainable`; leaves the best parameters applied, returns its loss."""
     problem = TeacherForced(sim, train, max_samples, seed)
-    best: list = [np.inf, params.state()]
-    scale: list[float] = []
+    if iterations <= 0:
+        return problem.evaluate(params, [])[0]     # evaluating applies the parameters
 
-    def closure() -> torch.Tensor:
+    def evaluate() -> tuple[float, list[torch.Tensor]]:
         loss, _, grads = problem.evaluate(params, trainable)
-        if loss < best[0]:
-            best[:] = [loss, params.state()]
-        scale.append(scale[0] if scale else 1.0 / max(loss, 1e-30))   # L-BFGS's first step assumes O(1)
-        for t, g in zip(trainable, grads):
-            t.grad = g * scale[0]
-        return torch.tensor(loss * scale[0], dtype=torch.float64)
+        return loss, grads
 
-    if iterations > 0:
-        torch.optim.LBFGS(trainable, lr=1.0, max_iter=iterations, max_eval=int(iterations * 1.5), history_size=10,
-                          line_search_fn="strong_wolfe", tolerance_grad=1e-12, tolerance_change=1e-14).step(closure)
-    else:
-        best[0] = problem.evaluate(params, [])[0]
-    params.load(best[1])
-    params.apply(sim.cloth)
-    sim.refresh()
-    return float(best[0])
+    return minimize_lbfgs(sim, params, trainable, evaluate, iterations)
 
 
 def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple[Candidate, np.ndarray]],

@@ -293,6 +293,34 @@ class FitConfig:
     term_params: tuple[str, ...] = ("collision.margin",)
 
 
+def minimize_lbfgs(sim: ImplicitSimulator, params: BehaviorParams, trainable: list[torch.Tensor],
+                   evaluate: Callable[[], tuple[float, list[torch.Tensor]]], iterations: int) -> float:
+    """Strong-Wolfe L-BFGS on `trainable`, `evaluate()` giving (loss, gradients) at the current parameters.
+
+    The loss is divided by its first value: L-BFGS's first step has no curvature history and assumes an O(1)
+    problem, which squared distances in metres are far from. Its last iterate need not be the best point it
+    evaluated, so the best state seen is kept: it is left applied to the cloth of `sim`, and its loss is returned.
+    """
+    best: list = [np.inf, params.state()]
+    scale: list[float] = []
+
+    def closure() -> torch.Tensor:
+        loss, grads = evaluate()
+        if loss < best[0]:
+            best[:] = [loss, params.state()]
+        scale.append(scale[0] if scale else 1.0 / max(loss, 1e-30))
+        for t, g in zip(trainable, grads):
+            t.grad = g * scale[0]
+        return torch.tensor(loss * scale[0], dtype=torch.float64)
+
+    torch.optim.LBFGS(trainable, lr=1.0, max_iter=iterations, max_eval=int(iterations * 1.5), history_size=10,
+                      line_search_fn="strong_wolfe", tolerance_grad=1e-12, tolerance_change=1e-14).step(closure)
+    params.load(best[1])
+    params.apply(sim.cloth)
+    sim.refresh()
+    return float(best[0])
+
+
 def fit_behavior(sim: ImplicitSimulator, train: list[Observed], config: FitConfig,
                  on_iteration: Callable[[str, int, float, float], None] | None = None
                  ) -> tuple[BehaviorParams, FitLog]:
@@ -309,28 +337,15 @@ def fit_behavior(sim: ImplicitSimulator, train: list[Observed], config: FitConfi
     for name, trainable, iterations, reg in stages:
         if iterations <= 0:
             continue
-        opt = torch.optim.LBFGS(trainable, lr=1.0, max_iter=iterations, max_eval=int(iterations * 1.5),
-                                history_size=10, line_search_fn="strong_wolfe", tolerance_grad=1e-12,
-                                tolerance_change=1e-14)
-        best = [np.inf, params.state()]
-        scale: list[float] = []
 
-        def closure() -> torch.Tensor:
+        def evaluate() -> tuple[float, list[torch.Tensor]]:
             loss, l2, grads = problem.evaluate(params, trainable, reg)
             log.stage.append(name)
             log.loss.append(loss)
             log.l2.append(l2)
             if on_iteration is not None:
                 on_iteration(name, len(log.loss), loss, l2)
-            if loss < best[0]:
-                best[:] = [loss, params.state()]
-            scale.append(scale[0] if scale else 1.0 / max(loss, 1e-30))   # L-BFGS's first step assumes O(1)
-            for t, g in zip(trainable, grads):
-                t.grad = g * scale[0]
-            return torch.tensor(loss * scale[0], dtype=torch.float64)
+            return loss, grads
 
-        opt.step(closure)
-        params.load(best[1])
-        params.apply(sim.cloth)
-        sim.refresh()
+        minimize_lbfgs(sim, params, trainable, evaluate, iterations)
     return params, log

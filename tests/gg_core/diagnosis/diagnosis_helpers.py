@@ -1,6 +1,6 @@
-"""Test helpers of the diagnosis tests: captures simulated by our own simulator with a known extra force (fast,
-exact physics): a sheet hanging from two corners attached to a swaying sphere 'body', written in the capture
-layout (ground-truth meshes only)."""
+"""Test helpers of the diagnosis and behaviour (stage 4) tests: captures simulated by our own simulator with a
+known material and optionally a known extra force (fast, exact physics): a sheet hanging from two corners attached
+to a swaying sphere 'body', written in the capture layout (ground-truth meshes only)."""
 from __future__ import annotations
 
 import sys

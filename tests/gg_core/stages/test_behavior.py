@@ -9,52 +9,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
+sys.path.insert(0, str(Path(__file__).parents[1] / "diagnosis"))
 
-from physics_helpers import sheet, uv_sphere  # noqa: E402
+from diagnosis_helpers import write_sim_capture  # noqa: E402
 
 from gg_core.errors import InputError  # noqa: E402
-from gg_core.geometry.meshio import write_ply  # noqa: E402
 from gg_core.jobs import parse_line  # noqa: E402
-from gg_core.physics.cloth import Cloth  # noqa: E402
 from gg_core.physics.fitting import FitConfig  # noqa: E402
-from gg_core.physics.material import Material  # noqa: E402
-from gg_core.physics.simulator import ClothState, ImplicitSimulator  # noqa: E402
 from gg_core.stages.behavior import BehaviorRequest, run_behavior  # noqa: E402
-from gg_core.storage import write_json  # noqa: E402
-
-TRUTH = {"density": 0.3, "mu": 40000.0, "lam": 20000.0, "bending": 4e-4}
-SEQUENCES = {"a": (0.08, 1.3), "b": (0.12, 0.9), "c": (0.1, 1.1)}   # sway amplitude (m), frequency (Hz)
-
-
-def write_capture(root: Path, n_frames: int = 16) -> Path:
-    bv, bf = uv_sphere(0.1, 12, 24, center=(0.0, 1.0, 0.0))
-    v, f = sheet(6, 6, 0.3, 0.3)
-    v = v[:, [0, 2, 1]] + [0.0, 0.7, 0.0]                    # hanging in the XY plane 5 cm below the sphere
-    top = np.flatnonzero(np.isclose(v[:, 1], v[:, 1].max()))
-    pinned = np.zeros(len(v), bool)
-    pinned[[top[0], top[-1]]] = True
-    cloth = Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **TRUTH))
-    for name, (amp, freq) in SEQUENCES.items():
-        t = np.arange(n_frames) / 30
-        shift = np.zeros((n_frames, 3))
-        shift[:, 0] = amp * np.sin(2 * np.pi * freq * t)
-        shift[:, 2] = 0.5 * amp * (1 - np.cos(2 * np.pi * freq * t))
-        body = bv[None] + shift[:, None]
-        pins = v[None] + shift[:, None]
-        traj = ImplicitSimulator(cloth).rollout(ClothState(v.copy(), np.zeros_like(v)), None, n_frames=n_frames,
-                                                pin_frames=pins)
-        (root / name).mkdir(parents=True)
-        (root / name / "cameras.json").write_text("{}")
-        for k in range(n_frames):
-            write_ply(root / name / "gt" / "garment" / f"{k:06d}.ply", traj[k], f)
-            write_ply(root / name / "body" / f"{k:06d}.ply", body[k], bf)
-    write_json(root / "truth.json", {"split": {"train_sequences": ["a", "b"], "heldout_sequences": ["c"]}})
-    return root
 
 
 def test_behavior_fit_improves_heldout_rollouts(tmp_path):
-    capture = write_capture(tmp_path / "capture")
+    capture = write_sim_capture(tmp_path / "capture")
     # the capture was simulated with one implicit step per frame: evaluate with the same integrator
     req = BehaviorRequest(capture=capture, project=tmp_path / "project", progress="none", substeps=1,
                           fit=FitConfig(global_iterations=12, local_iterations=3, max_samples=12))
@@ -84,7 +50,7 @@ def test_behavior_refuses_a_capture_without_registered_meshes(tmp_path):
 
 
 def test_progress_protocol(tmp_path, capsys):
-    capture = write_capture(tmp_path / "capture", n_frames=6)
+    capture = write_sim_capture(tmp_path / "capture", n_frames=6)
     req = BehaviorRequest(capture=capture, project=tmp_path / "project", progress="jsonl",
                           fit=FitConfig(global_iterations=1, local_iterations=0, max_samples=4))
     run_behavior(req)
