@@ -7,8 +7,9 @@ it through the force library, refit, and show the held-out rollout error before 
    weak form, after re-adjusting the global parameters to it (gg_core/diagnosis/residuals.py).
 3. Localization: per-vertex map, per-frame curve, their best-correlated state features, the standout region.
 4. Selection: forward sparse regression on the candidate library with a moving-block bootstrap.
-5. Confirmation: each proposed candidate is added to the simulator and refitted; it is accepted only if the
-   held-out rollout error drops by at least `min_gain`.
+5. Confirmation: the selected candidates, then the others by the share of the residual they explain, up to
+   `max_trials`, are each added to the simulator and refitted; the best is accepted only if the held-out
+   rollout error drops by at least `min_gain`.
 
 Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply, `--source registered`) or, for synthetic captures,
 the ground-truth meshes (`--source gt`), optionally with spatially correlated noise. truth.json is read only for
@@ -56,9 +57,8 @@ class DiagnoseRequest:
     probe_acceleration: float = 0.5    # m/s^2: size of the model changes whose responses form the regression
     min_explained: float = 0.05        # share of the residual a selected candidate must explain
     min_inclusion: float = 0.5         # bootstrap inclusion probability a candidate needs to be tried
-    tie_ratio: float = 0.5             # unselected candidates explaining this share of the best one's are tried too
     min_gain: float = 0.10             # relative held-out rollout improvement needed to accept
-    max_trials: int = 3
+    max_trials: int = 5                # candidates refitted and judged on held-out rollouts
     bootstrap: int = 100
     reference: list[str] = field(default_factory=list)   # candidates always trialled (benchmarks), never accepted
     reference_region: str = ""         # .npy of [V] weights for region candidates in reference trials
