@@ -65,7 +65,7 @@ def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
 
     air_drag: Blender's cloth solver applies -0.01 air_damping v per vertex with time in frames and its per-vertex
     mass, i.e. mass damping alpha = 0.01 air_damping fps / vertex_mass (1/s); the diagnosis estimates the total
-    (the reference's air damping included, our baseline has none). stiff_patch: Blender scales its spring
+    (the baseline's default 1/s included). stiff_patch: Blender scales its spring
     stiffnesses, ours the StVK Lame parameters: comparable only approximately. Wind strength and Blender's
     friction coefficient have no counterpart in our units and are not scored."""
     effect, params = truth["effect"]["name"], truth["effect"]["params"]

@@ -24,6 +24,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--noise-mm", type=float, default=0.0,
                         help="add spatially correlated noise of this standard deviation (mm) to the garment meshes")
     parser.add_argument("--noise-length-mm", type=float, default=50.0, help="correlation length of that noise (mm)")
+    parser.add_argument("--denoise", choices=("auto", "on", "off"), default="auto",
+                        help="smooth the sequences in time before diagnosing: auto = when the noise estimated from "
+                             "the data exceeds 0.5 mm (noisy velocities make any damping look right)")
     parser.add_argument("--attach-tol-mm", type=float, default=3.0,
                         help="vertices that stay this close to a fixed place on the body are attached (pinned)")
     parser.add_argument("--baseline-iterations", type=int, default=15,
@@ -45,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     req = DiagnoseRequest(capture=args.capture, project=args.project, source=args.source, train=args.train,
                           heldout=args.heldout, noise_mm=args.noise_mm, noise_length_mm=args.noise_length_mm,
-                          attach_tol_mm=args.attach_tol_mm, fps=args.fps, substeps=args.substeps, seed=args.seed,
+                          denoise=args.denoise,                           attach_tol_mm=args.attach_tol_mm, fps=args.fps, substeps=args.substeps, seed=args.seed,
                           baseline_iterations=args.baseline_iterations, refit_iterations=args.refit_iterations,
                           max_samples=args.max_samples, min_gain=args.min_gain, bootstrap=args.bootstrap,
                           progress=args.progress)

@@ -8,7 +8,7 @@ per-vertex density, a tight seam per-edge rest length, as forces.py documents).
 
 `equivalence` names the class of effects the data cannot tell apart; the diagnosis names classes, and a
 benchmark scores an answer right when its class matches. Coefficient bounds make one-sided effects one-sided
-(damping and drag only remove energy; friction only adds to the baseline's).
+(damping and drag only remove energy; friction and damping only add to the baseline's).
 """
 from __future__ import annotations
 
@@ -153,10 +153,15 @@ def _vector_term(term: str, key: str) -> Callable[[np.ndarray, Context], ModelCh
     return lambda c, ctx: ModelChange({term: {key: tuple(float(v) for v in c)}}, (f"{term}.{key}",))
 
 
-def _friction_model(c: np.ndarray, ctx: Context) -> ModelChange:
-    base = ctx.term("body_friction")
-    mu = (0.0 if base is None else base.p("mu")) + float(c[0])
-    return ModelChange({"body_friction": {"mu": mu}}, ("body_friction.mu",))
+def _added_term(term: str, key: str) -> Callable[[np.ndarray, Context], ModelChange]:
+    """The coefficient adds to what the baseline's own term has (friction, damping: part of the default model)."""
+
+    def model(c: np.ndarray, ctx: Context) -> ModelChange:
+        base = ctx.term(term)
+        value = (0.0 if base is None else base.p(key)) + float(c[0])
+        return ModelChange({term: {key: value}}, (f"{term}.{key}",))
+
+    return model
 
 
 def _anisotropy_model(c: np.ndarray, ctx: Context) -> ModelChange:
@@ -204,10 +209,10 @@ CANDIDATES: tuple[Candidate, ...] = (
               _term_columns("wind_pressure", [{"pressure": tuple(np.eye(3)[k])} for k in range(3)]),
               _vector_term("wind_pressure", "pressure")),
     Candidate("mass_damping", "linear_damping",
-              "linear damping -alpha m v (Rayleigh mass damping, the same as linear isotropic air drag for uniform "
+              "extra linear damping -alpha m v (Rayleigh mass damping, the same as linear isotropic air drag for uniform "
               "density): everywhere, in all directions, proportional to speed",
               ("alpha",), "1/s", (0.0, np.inf),
-              _term_columns("mass_damping", [{"alpha": 1.0}]), _scalar_term("mass_damping", "alpha")),
+              _term_columns("mass_damping", [{"alpha": 1.0}]), _added_term("mass_damping", "alpha")),
     Candidate("strain_rate_damping", "material_damping",
               "internal damping against the edge strain rate: stretch waves and impacts, zero for rigid motion",
               ("beta",), "N s", (0.0, np.inf),
@@ -215,7 +220,7 @@ CANDIDATES: tuple[Candidate, ...] = (
     Candidate("body_friction", "friction",
               "extra Coulomb friction -mu N t against the body: shoulders, waist and hips while sliding",
               ("mu",), "1", (0.0, np.inf),
-              _term_columns("body_friction", [{"mu": 1.0}]), _friction_model),
+              _term_columns("body_friction", [{"mu": 1.0}]), _added_term("body_friction", "mu")),
     Candidate("anisotropic_stretch", "anisotropy",
               "extra stiffness along the warp (template vertical) and weft yarns: tension regions, bias cuts",
               ("k_warp", "k_weft"), "Pa", (0.0, np.inf),

@@ -1,10 +1,22 @@
-"""Spatially correlated position noise, the error model of registered meshes: neighbouring vertices err together
-(a registration shifts whole patches), independently from frame to frame."""
+"""Position noise of observed garment sequences: the error model of registered meshes (neighbouring vertices err
+together, a registration shifts whole patches, independently from frame to frame), an estimate of its level from
+the data alone, and the temporal smoothing the diagnosis applies when that level is high.
+
+Why smoothing matters: the simulator's step reads the velocity (x_t - x_{t-1}) fps and is judged on x_{t+1}, so
+independent noise of std sigma on every frame correlates the observed acceleration with the observed velocity by
+-3 sigma^2 fps^3. Any damping term then fits that correlation: measured on the benchmark's skirt with 1.5 mm noise,
+an apparent mass damping of 12-32 /s (the reference cloth has 1 /s), against 0.05-1.8 /s after a 9-frame cubic
+Savitzky-Golay filter, which itself biases damping by at most -0.3 /s on noise-free data.
+"""
 from __future__ import annotations
 
 import numpy as np
+from scipy.signal import savgol_filter
 from scipy.sparse import coo_matrix
 from scipy.spatial import cKDTree
+
+SMOOTH_WINDOW = 9        # frames of the Savitzky-Golay filter
+SMOOTH_ORDER = 3
 
 
 def correlated_noise(template: np.ndarray, sigma: float, length: float, n_frames: int,
@@ -21,3 +33,22 @@ def correlated_noise(template: np.ndarray, sigma: float, length: float, n_frames
     scale = sigma / np.sqrt(np.asarray(kernel.multiply(kernel).sum(1)).ravel())
     white = rng.normal(size=(n, 3 * n_frames))
     return (scale[:, None] * (kernel @ white)).reshape(n, n_frames, 3).transpose(1, 0, 2)
+
+
+def noise_level(positions: np.ndarray) -> float:
+    """Per-coordinate standard deviation (m) of frame-independent noise on [T,V,3] positions (T >= 4).
+
+    The third time difference of smooth motion is small, that of independent noise has variance 20 sigma^2; the
+    median absolute value (x 1.4826 for a Gaussian) ignores the few frames where the motion itself jerks
+    (contacts). Measured on the benchmark skirt: 0.03-0.2 mm without noise, 1.54 mm with 1.5 mm noise."""
+    d3 = np.diff(positions, 3, axis=0)
+    return float(1.4826 * np.median(np.abs(d3)) / np.sqrt(20.0))
+
+
+def smooth_in_time(positions: np.ndarray) -> np.ndarray:
+    """[T,V,3] positions filtered along time by a cubic Savitzky-Golay filter (exact for cubic motion), with the
+    window shortened to the sequence (odd, at least order + 2)."""
+    window = min(SMOOTH_WINDOW, len(positions) - (1 - len(positions) % 2))
+    if window < SMOOTH_ORDER + 2:
+        return positions.copy()
+    return savgol_filter(positions, window, SMOOTH_ORDER, axis=0, mode="interp")

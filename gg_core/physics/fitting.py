@@ -271,7 +271,9 @@ class TeacherForced:
 
 def rollout_error(sim: ImplicitSimulator, obs: Observed, pinned: np.ndarray) -> float:
     """Mean distance (m) between a free rollout and the observation over all frames after the first two and all
-    simulated vertices; the rollout starts from the observed frame 1 with the velocity of frames 0-1."""
+    simulated vertices; the rollout starts from the observed frame 1 with the velocity of frames 0-1 (the
+    backward-Euler velocity the simulator's own steps produce; noisy sequences are smoothed in time first, see
+    gg_core/diagnosis/noise.py)."""
     g = obs.garment
     state = ClothState(g[1].copy(), (g[1] - g[0]) * obs.fps)
     traj = sim.rollout(state, None if obs.body is None else obs.body[1:], n_frames=len(g) - 1, pin_frames=g[1:])

@@ -1,6 +1,8 @@
 """Diagnosis: find where and when the fitted simulator misses the observed motion, name the missing physics, add
 it through the force library, refit, and show the held-out rollout error before and after.
 
+0. Denoising: the noise level of every sequence is estimated from its third time differences; above 0.5 mm all
+   sequences are smoothed in time (gg_core/diagnosis/noise.py: noisy velocities make any damping look right).
 1. Baseline: the behaviour fit with global parameters only (material, contact margin; per-vertex fields could
    silently absorb a missing effect), rest shape = the first training frame.
 2. Residual: the one-frame position error of the simulator's own step on the training sequences, pooled in the
@@ -28,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..capture.layout import Capture, Sequence
+from ..diagnosis.noise import SMOOTH_ORDER, SMOOTH_WINDOW, correlated_noise, noise_level, smooth_in_time
 from ..errors import InputError
 from ..geometry.meshio import write_ply
 from ..jobs import Progress
@@ -36,6 +39,8 @@ from .behavior import attached_vertices, hand_mask, load_sequence, split
 
 STAGE = "diagnose"
 SOURCES = ("gt", "registered")
+DENOISE = ("auto", "on", "off")
+DENOISE_ABOVE_MM = 0.5    # noise-free benchmark sequences estimate at 0.03-0.2 mm (contacts), noisy ones at sigma
 
 
 @dataclass
@@ -47,6 +52,7 @@ class DiagnoseRequest:
     heldout: list[str] = field(default_factory=list)
     noise_mm: float = 0.0              # spatially correlated noise added to the garment meshes (std, mm)
     noise_length_mm: float = 50.0      # its correlation length
+    denoise: str = "auto"              # temporal smoothing: auto (when the estimated noise exceeds 0.5 mm), on, off
     attach_tol_mm: float = 3.0
     fps: float = 30.0
     substeps: int = 2
@@ -82,6 +88,35 @@ class _MeshView:
     body_files: dict[str, Path]
 
 
+@dataclass
+class Denoising:
+    """Per-sequence noise estimates (mm, before smoothing) and whether the sequences were smoothed in time."""
+
+    noise_mm: dict[str, float]
+    smoothed: bool
+
+    @property
+    def level_mm(self) -> float:
+        return float(np.median(list(self.noise_mm.values())))
+
+    def to_json(self) -> dict:
+        return {"noise_estimate_mm": self.noise_mm, "smoothed": self.smoothed,
+                "filter": {"kind": "savitzky-golay", "window": SMOOTH_WINDOW, "order": SMOOTH_ORDER}
+                if self.smoothed else None}
+
+
+def denoise(req: DiagnoseRequest, loaded: dict) -> Denoising:
+    """Estimate every sequence's noise and, if asked or (auto) if the median estimate is above DENOISE_ABOVE_MM,
+    smooth all of them in time, in place (noise.py says why: noise makes any damping look right)."""
+    levels = {n: noise_level(obs.garment) * 1e3 for n, (obs, _, _) in loaded.items()}
+    result = Denoising(levels, False)
+    result.smoothed = req.denoise == "on" or (req.denoise == "auto" and result.level_mm > DENOISE_ABOVE_MM)
+    if result.smoothed:
+        for obs, _, _ in loaded.values():
+            obs.garment = smooth_in_time(obs.garment)
+    return result
+
+
 def load(req: DiagnoseRequest, capture: Capture, names: list[str]) -> dict:
     rng = np.random.default_rng(req.seed)
     out = {}
@@ -94,8 +129,6 @@ def load(req: DiagnoseRequest, capture: Capture, names: list[str]) -> dict:
                              "run registration first (gg register), or use --source gt on a synthetic capture")
         obs, faces, body_faces = load_sequence(_MeshView(seq.root, n, files, seq.body_files), 0.0, rng, req.fps)
         if req.noise_mm > 0:
-            from ..diagnosis.noise import correlated_noise  # noqa: PLC0415 - scipy only when asked for
-
             obs.garment = obs.garment + correlated_noise(obs.garment[0], req.noise_mm * 1e-3,
                                                          req.noise_length_mm * 1e-3, len(obs.garment), rng)
         out[n] = (obs, faces, body_faces)
@@ -115,6 +148,8 @@ def inputs_key(req: DiagnoseRequest, capture: Capture, names: list[str]) -> dict
 def run_diagnose(req: DiagnoseRequest) -> Path:
     if req.source not in SOURCES:
         raise InputError(f"unknown source '{req.source}'", "--source", f"choose one of: {', '.join(SOURCES)}")
+    if req.denoise not in DENOISE:
+        raise InputError(f"unknown denoise mode '{req.denoise}'", "--denoise", f"choose one of: {', '.join(DENOISE)}")
     start = time.perf_counter()
     capture = Capture(req.capture)
     train_names, heldout_names = split(capture, list(req.train), list(req.heldout))
@@ -132,11 +167,13 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     from ..diagnosis.report import write_html  # noqa: PLC0415
 
     loaded = load(req, capture, train_names + heldout_names)
+    denoised = denoise(req, loaded)
     train = [loaded[n][0] for n in train_names]
     heldout = [loaded[n][0] for n in heldout_names]
     faces, body_faces = loaded[train_names[0]][1], loaded[train_names[0]][2]
     # noise moves attached vertices too: widen the tolerance by four standard deviations
-    attached = attached_vertices(train, body_faces, (req.attach_tol_mm + 4 * req.noise_mm) * 1e-3)
+    noise_mm = max(req.noise_mm, denoised.level_mm if denoised.smoothed else 0.0)
+    attached = attached_vertices(train, body_faces, (req.attach_tol_mm + 4 * noise_mm) * 1e-3)
     reference_region = np.load(req.reference_region) if req.reference_region else None
     result = diagnose(req, train, heldout, faces, body_faces, attached, hand_mask(train[0].body.shape[1]),
                       reference_region, Progress(STAGE, 9 + req.max_trials + len(req.reference), req.progress))
@@ -149,7 +186,7 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     payload = result.summary()
     payload.update({
         "train_sequences": train_names, "heldout_sequences": heldout_names, "source": req.source,
-        "noise_mm": req.noise_mm, "vertices": len(train[0].garment[0]), "attached_vertices": int(attached.sum()),
+        "noise_mm": req.noise_mm, "denoising": denoised.to_json(), "vertices": len(train[0].garment[0]), "attached_vertices": int(attached.sum()),
         "outputs": {"residual_vertex": str(out / "residual_vertex.npy"),
                     "residual_vertex_unit": "m/s^2 (one-frame position error over the frame time squared)",
                     "residual_frame": str(out / "residual_frame.json"), "template": str(out / "template.ply"),

@@ -34,12 +34,13 @@ def hanging_sheet() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def write_sim_capture(root: Path, extra: dict[str, dict] | None = None, n_frames: int = 16) -> Path:
-    """Sequences a, b (train) and c (held out) of the sheet simulated with the base terms plus `extra`."""
+    """Sequences a, b (train) and c (held out) of the sheet simulated with the default model (its air damping
+    included) plus `extra`."""
     extra = extra or {}
     bv, bf = uv_sphere(0.1, 12, 24, center=(0.0, 1.0, 0.0))
     v, f, pinned = hanging_sheet()
     cloth = Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **MATERIAL))
-    terms = make_terms(["gravity", "stretching", "bending"] + list(extra), extra)
+    terms = make_terms(["gravity", "stretching", "bending", "mass_damping"] + list(extra), extra)
     for name, (amp, freq) in SEQUENCES.items():
         t = np.arange(n_frames) / 30
         shift = np.zeros((n_frames, 3))

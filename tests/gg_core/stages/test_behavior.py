@@ -23,7 +23,7 @@ def test_behavior_fit_improves_heldout_rollouts(tmp_path):
     capture = write_sim_capture(tmp_path / "capture")
     # the capture was simulated with one implicit step per frame: evaluate with the same integrator
     req = BehaviorRequest(capture=capture, project=tmp_path / "project", progress="none", substeps=1,
-                          fit=FitConfig(global_iterations=12, local_iterations=3, max_samples=12))
+                          fit=FitConfig(global_iterations=20, local_iterations=3, max_samples=12))
     report = json.loads(run_behavior(req).read_text())
     for key in ("heldout_l2_default", "heldout_l2_fitted", "train_l2_default", "train_l2_fitted", "fitted",
                 "timings"):
