@@ -48,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
 
     req = DiagnoseRequest(capture=args.capture, project=args.project, source=args.source, train=args.train,
                           heldout=args.heldout, noise_mm=args.noise_mm, noise_length_mm=args.noise_length_mm,
-                          denoise=args.denoise,                           attach_tol_mm=args.attach_tol_mm, fps=args.fps, substeps=args.substeps, seed=args.seed,
+                          denoise=args.denoise, attach_tol_mm=args.attach_tol_mm, fps=args.fps,
+                          substeps=args.substeps, seed=args.seed,
                           baseline_iterations=args.baseline_iterations, refit_iterations=args.refit_iterations,
                           max_samples=args.max_samples, min_gain=args.min_gain, bootstrap=args.bootstrap,
                           progress=args.progress)

@@ -4,8 +4,10 @@ A trial copies the baseline simulator, switches the candidates' force-library te
 material fields), and refits the global material together with the candidates' coefficients on the training
 sequences (teacher-forced one-frame loss, L-BFGS, warm-started from the baseline and the regression's
 coefficients). Its held-out rollout error decides: an effect is accepted only if it lowers the error by at least
-`min_gain` relative to the baseline. The regression only proposes; rollouts on sequences the fit never saw
-decide, which also protects against effects that fit single frames but drift in free rollouts.
+`min_gain` relative to the baseline, and also lowers the free-rollout error of the training sequences (a real
+effect helps every recording; a term that only helps the held-out one got lucky among the many tried). The
+regression only proposes; rollouts decide, which also protects against effects that fit single frames but drift
+in free rollouts.
 """
 from __future__ import annotations
 
@@ -56,6 +58,7 @@ class Trial:
     names: list[str]
     heldout_l2: float
     train_loss: float
+    train_l2: float             # free-rollout error on the training sequences (the fit saw them only one frame ahead)
     values: dict[str, object] = field(default_factory=dict)
     seconds: float = 0.0
 
@@ -99,4 +102,5 @@ def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple
     sim.refresh()
     loss = refit(sim, params, train, [params.global_z, params.term_s, params.region_s], iterations, max_samples)
     error = float(np.mean([rollout_error(sim, obs, pinned) for obs in heldout]))
-    return Trial([c.name for c, _ in chosen], error, loss, params.values(), time.perf_counter() - start)
+    train_error = float(np.mean([rollout_error(sim, obs, pinned) for obs in train]))
+    return Trial([c.name for c, _ in chosen], error, loss, train_error, params.values(), time.perf_counter() - start)

@@ -209,8 +209,8 @@ CANDIDATES: tuple[Candidate, ...] = (
               _term_columns("wind_pressure", [{"pressure": tuple(np.eye(3)[k])} for k in range(3)]),
               _vector_term("wind_pressure", "pressure")),
     Candidate("mass_damping", "linear_damping",
-              "extra linear damping -alpha m v (Rayleigh mass damping, the same as linear isotropic air drag for uniform "
-              "density): everywhere, in all directions, proportional to speed",
+              "extra linear damping -alpha m v (Rayleigh mass damping, the same as linear isotropic air drag for "
+              "uniform density): everywhere, in all directions, proportional to speed",
               ("alpha",), "1/s", (0.0, np.inf),
               _term_columns("mass_damping", [{"alpha": 1.0}]), _added_term("mass_damping", "alpha")),
     Candidate("strain_rate_damping", "material_damping",

@@ -11,7 +11,7 @@ it through the force library, refit, and show the held-out rollout error before 
 4. Selection: forward sparse regression on the candidate library with a moving-block bootstrap.
 5. Confirmation: the selected candidates, then the others by the share of the residual they explain, up to
    `max_trials`, are each added to the simulator and refitted; the best is accepted only if the held-out
-   rollout error drops by at least `min_gain`.
+   rollout error drops by at least `min_gain` and the training sequences' free rollouts improve too.
 
 Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply, `--source registered`) or, for synthetic captures,
 the ground-truth meshes (`--source gt`), optionally with spatially correlated noise. truth.json is read only for
@@ -64,7 +64,7 @@ class DiagnoseRequest:
     min_explained: float = 0.05        # share of the residual a selected candidate must explain
     min_inclusion: float = 0.5         # bootstrap inclusion probability a candidate needs to be tried
     min_gain: float = 0.10             # relative held-out rollout improvement needed to accept
-    max_trials: int = 5                # candidates refitted and judged on held-out rollouts
+    max_trials: int = 12               # candidates refitted and judged on rollouts (12: every one that acts)
     bootstrap: int = 100
     reference: list[str] = field(default_factory=list)   # candidates always trialled (benchmarks), never accepted
     reference_region: str = ""         # .npy of [V] weights for region candidates in reference trials
@@ -101,19 +101,27 @@ class Denoising:
 
     def to_json(self) -> dict:
         return {"noise_estimate_mm": self.noise_mm, "smoothed": self.smoothed,
-                "filter": {"kind": "savitzky-golay", "window": SMOOTH_WINDOW, "order": SMOOTH_ORDER}
+                "filter": {"kind": "savitzky-golay", "window": SMOOTH_WINDOW, "order": SMOOTH_ORDER,
+                           "frames_dropped_at_each_end": SMOOTH_WINDOW // 2}
                 if self.smoothed else None}
 
 
 def denoise(req: DiagnoseRequest, loaded: dict) -> Denoising:
     """Estimate every sequence's noise and, if asked or (auto) if the median estimate is above DENOISE_ABOVE_MM,
-    smooth all of them in time, in place (noise.py says why: noise makes any damping look right)."""
+    smooth all of them in time, in place, dropping the SMOOTH_WINDOW // 2 frames at each end of every sequence
+    (garment and body) where the filter is not centred (noise.py says why: noise makes any damping look right)."""
     levels = {n: noise_level(obs.garment) * 1e3 for n, (obs, _, _) in loaded.items()}
     result = Denoising(levels, False)
     result.smoothed = req.denoise == "on" or (req.denoise == "auto" and result.level_mm > DENOISE_ABOVE_MM)
     if result.smoothed:
+        h = SMOOTH_WINDOW // 2
+        short = [n for n, (obs, _, _) in loaded.items() if len(obs.garment) < SMOOTH_WINDOW + 3]
+        if short:
+            raise InputError(f"sequences {short} are too short to smooth in time ({SMOOTH_WINDOW + 3} frames needed)",
+                             req.capture, "record longer sequences, or pass --denoise off")
         for obs, _, _ in loaded.values():
             obs.garment = smooth_in_time(obs.garment)
+            obs.body = None if obs.body is None else obs.body[h:len(obs.body) - h]
     return result
 
 
@@ -186,7 +194,8 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     payload = result.summary()
     payload.update({
         "train_sequences": train_names, "heldout_sequences": heldout_names, "source": req.source,
-        "noise_mm": req.noise_mm, "denoising": denoised.to_json(), "vertices": len(train[0].garment[0]), "attached_vertices": int(attached.sum()),
+        "noise_mm": req.noise_mm, "denoising": denoised.to_json(), "vertices": len(train[0].garment[0]),
+        "attached_vertices": int(attached.sum()),
         "outputs": {"residual_vertex": str(out / "residual_vertex.npy"),
                     "residual_vertex_unit": "m/s^2 (one-frame position error over the frame time squared)",
                     "residual_frame": str(out / "residual_frame.json"), "template": str(out / "template.ply"),

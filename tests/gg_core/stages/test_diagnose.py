@@ -18,7 +18,8 @@ from diagnosis_helpers import write_sim_capture  # noqa: E402
 
 from gg_core.errors import InputError  # noqa: E402
 from gg_core.geometry.meshio import read_mesh  # noqa: E402
-from gg_core.stages.diagnose import DiagnoseRequest, run_diagnose  # noqa: E402
+from gg_core.physics.fitting import Observed  # noqa: E402
+from gg_core.stages.diagnose import DiagnoseRequest, denoise, run_diagnose  # noqa: E402
 
 FAST = {"substeps": 1, "baseline_iterations": 10, "refit_iterations": 6, "bootstrap": 30, "max_samples": 24,
         "progress": "none"}
@@ -110,3 +111,28 @@ def test_blender_reference_physics_gives_verdict_none(blender_captures, tmp_path
     report = json.loads(run_diagnose(DiagnoseRequest(capture=blender_captures["none"], project=tmp_path,
                                                      **BLENDER)).read_text())
     assert report["verdict"] == "none"
+
+
+def _loaded(noise: float, n_frames: int = 20) -> dict:
+    t = np.arange(n_frames)[:, None, None] / 30.0
+    garment = np.random.default_rng(0).uniform(-0.2, 0.2, (1, 60, 3)) + 0.05 * np.sin(2 * np.pi * 0.8 * t)
+    garment = garment + np.random.default_rng(1).normal(0, noise, garment.shape)
+    body = np.repeat(np.arange(n_frames, dtype=float)[:, None, None], 10, 1).repeat(3, 2)
+    return {n: (Observed(n, garment.copy(), body.copy(), 30.0), None, None) for n in ("a", "b")}
+
+
+def test_noisy_sequences_are_smoothed_and_trimmed_clean_ones_left_alone(tmp_path):
+    req = DiagnoseRequest(capture=tmp_path, project=tmp_path)
+    clean = _loaded(0.0)
+    result = denoise(req, clean)
+    assert not result.smoothed and result.level_mm < 0.1 and clean["a"][0].garment.shape == (20, 60, 3)
+    noisy = _loaded(0.0015)
+    result = denoise(req, noisy)
+    obs = noisy["a"][0]
+    assert result.smoothed and result.level_mm == pytest.approx(1.5, rel=0.15)
+    assert obs.garment.shape == (12, 60, 3) and obs.body[0, 0, 0] == 4.0    # 4 frames dropped at each end
+    assert result.to_json()["filter"]["window"] == 9
+    req.denoise = "off"
+    assert not denoise(req, _loaded(0.0015)).smoothed
+    with pytest.raises(InputError, match="too short"):
+        denoise(DiagnoseRequest(capture=tmp_path, project=tmp_path, denoise="on"), _loaded(0.0, n_frames=10))
