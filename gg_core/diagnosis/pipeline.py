@@ -229,7 +229,9 @@ def _candidate_rows(ctx: Context, pooling: Pooling, predicted: np.ndarray, accel
         probes = cand.probes(ctx, acceleration)
         if any(size == 0 for size, _ in probes):
             continue
-        blocks[cand.name] = pooling.rows(responses(ctx.sim, ctx.batch, predicted, probes)).T
+        rows = pooling.rows(responses(ctx.sim, ctx.batch, predicted, probes)).T
+        if np.isfinite(rows).all():         # a probe whose step failed to solve (measured: friction on one
+            blocks[cand.name] = rows        # noisy capture) cannot be regressed on; the candidate is not tried
     return blocks
 
 
@@ -237,13 +239,15 @@ def _reference_trial(cand: Candidate, sim: ImplicitSimulator, batch: FrameBatch,
                      predicted: np.ndarray, region: np.ndarray | None, req: DiagnoseRequest, train: list[Observed],
                      heldout: list[Observed], attached: np.ndarray) -> Trial:
     """A trial of `cand` whatever the selection said, on the given region (benchmarks: the true effect, on the
-    true region), started from its regression coefficients on that region (its probe sizes where those are 0)."""
+    true region), started from its regression coefficients on that region (its probe sizes where those are 0 or
+    the probe's step failed)."""
     ctx = Context.build(sim, batch, region if cand.needs_region else None)
     probes = cand.probes(ctx, req.probe_acceleration)
     rows = pooling.rows(responses(sim, batch, predicted, probes)).T
-    coefs = fit(gram(Design(design.y, design.nuisance, {cand.name: rows}, design.groups)), [cand.name], BY_NAME
-                ).coefs[cand.name]
-    sizes = np.array([size for size, _ in probes])
-    coefs = np.where(coefs != 0, coefs, sizes)
+    coefs = np.array([size for size, _ in probes])
+    if np.isfinite(rows).all():
+        fitted = fit(gram(Design(design.y, design.nuisance, {cand.name: rows}, design.groups)), [cand.name],
+                     BY_NAME).coefs[cand.name]
+        coefs = np.where(fitted != 0, fitted, coefs)
     return trial(sim, BASELINE_FIT, [(cand, coefs)], ctx, ctx.region, train, heldout, attached,
                  req.refit_iterations, req.max_samples)
