@@ -33,21 +33,24 @@ class Result:
     selection: Selection
     trials: dict[str, Trial]
     accepted: list[str]
-    heldout_before: float
+    null: Trial                        # the baseline refitted with no candidate (what trials are judged against)
     heldout_after: float
     baseline: dict[str, float]
     nuisance: dict[str, float]
     batch: FrameBatch
     progress: Progress
-    null: Trial | None = None          # the baseline refitted with no candidate (what trials are judged against)
     reference: dict[str, Trial] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def heldout_before(self) -> float:
+        return self.null.heldout_l2
 
     def gain(self, t: Trial) -> float:
         return 1.0 - t.heldout_l2 / self.heldout_before
 
-    def train_gain(self, t: Trial) -> float | None:
-        return None if self.null is None else 1.0 - t.train_l2 / self.null.train_l2
+    def train_gain(self, t: Trial) -> float:
+        return 1.0 - t.train_l2 / self.null.train_l2
 
     def frame_curve(self, train: list[Observed]) -> dict:
         loc = self.localization
@@ -105,7 +108,7 @@ class Result:
                              "vertex_map_max": float(loc.vertex_map.max()),
                              "vertex_map_median": float(np.median(loc.vertex_map[loc.vertex_map > 0])),
                              "region_vertices": None if loc.region is None else np.flatnonzero(loc.region).tolist()},
-            "train_rollout_l2_before": None if self.null is None else self.null.train_l2,
+            "train_rollout_l2_before": self.null.train_l2,
             "reference_trials": {n: {"heldout_l2": t.heldout_l2, "heldout_gain": self.gain(t),
                                      "train_rollout_gain": self.train_gain(t), "refit": t.values}
                                  for n, t in self.reference.items()},
@@ -194,8 +197,8 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     baseline = {k: v for k, v in params.global_values().items()}
     baseline.update({f"{t.name}.{k}": float(t.params[k]) for t, k, _ in params.term_refs})
     baseline["heldout_l2_global_fit"] = baseline_l2
-    return Result(loc, sel, trials, accepted, before, after, baseline, dict(zip(labels, adjust.tolist())), batch,
-                  progress, null, reference, timings)
+    return Result(loc, sel, trials, accepted, null, after, baseline, dict(zip(labels, adjust.tolist())), batch,
+                  progress, reference, timings)
 
 
 def confirmed(t: Trial, reference: Trial, min_gain: float) -> bool:
