@@ -135,9 +135,9 @@ def write_html(path: Path, report: dict, vertices: np.ndarray, faces: np.ndarray
         if len(report["accepted"]) > 1:
             verdict += f"<p>Together: held-out rollout error {before * 1e3:.1f} mm to {after * 1e3:.1f} mm.</p>"
     else:
-        verdict = (f"<p>Nothing missing: no candidate effect, refitted, lowered the held-out rollout error by the "
-                   f"required margin while also improving the training sequences' rollouts (baseline "
-                   f"{before * 1e3:.1f} mm).</p>")
+        verdict = (f"<p>Nothing missing: no candidate effect, refitted to physically plausible values, lowered the "
+                   f"held-out rollout error by the required margin while also improving the training sequences' "
+                   f"rollouts (baseline {before * 1e3:.1f} mm).</p>")
     noise = report.get("denoising")
     if noise:
         levels = ", ".join(f"{n} {v:.2f} mm" for n, v in noise["noise_estimate_mm"].items())
@@ -148,7 +148,8 @@ def write_html(path: Path, report: dict, vertices: np.ndarray, faces: np.ndarray
     rows = "".join(
         f"<tr><td>{html.escape(e['name'])}</td><td>{html.escape(e['class'])}</td><td>{e['evidence']['explained']:.1%}"
         f"</td><td>{e['uncertainty']['inclusion_probability']:.0%}</td><td>{html.escape(_fmt_params(e))}</td>"
-        f"<td>{_pct(e.get('heldout_gain'))}</td><td>{_pct(e.get('train_rollout_gain'))}</td></tr>"
+        f"<td>{_pct(e.get('heldout_gain'))}</td><td>{_pct(e.get('train_rollout_gain'))}</td>"
+        f"<td>{html.escape(e.get('implausible') or '')}</td></tr>"
         for e in report["effects"])
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>Missing-physics diagnosis</title>
 <style>body{{font-family:sans-serif;max-width:980px;margin:2em auto}}
@@ -163,7 +164,8 @@ td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc
 <p>Best-correlated state: {html.escape(loc['step_feature']['meaning'] or loc['step_feature']['name'])}, Spearman
 {loc['step_feature']['spearman']:.2f}.</p><img src="{plot}" alt="residual over time">
 <h2>Candidates</h2><table><tr><th>candidate</th><th>class</th><th>explained</th><th>bootstrap inclusion</th>
-<th>coefficients (regression)</th><th>held-out gain</th><th>training-rollout gain</th></tr>{rows}</table>
+<th>coefficients (regression)</th><th>held-out gain</th><th>training-rollout gain</th><th>not physical because</th>
+</tr>{rows}</table>
 <p>Held-out rollout error: {before * 1e3:.2f} mm before, {after * 1e3:.2f} mm after.</p></body></html>"""
     with atomic_path(path) as tmp:
         tmp.write_text(page)

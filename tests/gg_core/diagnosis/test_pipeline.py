@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from gg_core.diagnosis.confirm import Trial
-from gg_core.diagnosis.pipeline import confirmed, propose
+from gg_core.diagnosis.pipeline import confirmed, implausible, propose
 from gg_core.diagnosis.selection import Selection
 
 
@@ -23,3 +23,20 @@ def test_confirmation_needs_the_heldout_gain_and_better_training_rollouts():
     assert confirmed(Trial(["a"], 0.0085, 1.0, 0.011), null, 0.10)
     assert not confirmed(Trial(["a"], 0.0095, 1.0, 0.011), null, 0.10)    # held-out gain 5 % < 10 %
     assert not confirmed(Trial(["a"], 0.0080, 1.0, 0.0125), null, 0.10)   # lucky on the held-out sequence only
+
+
+def test_damping_that_stops_cloth_falling_is_not_air():
+    """Terminal speed g / alpha: 1/s (default) falls at 9.8 m/s, 277/s (fitted to registration jitter) at 3.5 cm/s;
+    quadratic drag sqrt(rho_area g / coef): 0.2 kg/m^2 at coef 0.6 falls at 1.8 m/s, at coef 100 at 0.14 m/s."""
+    def damped(alpha: float) -> Trial:
+        return Trial(["mass_damping"], 0.008, 1.0, 0.01, {"material.density": 0.2, "mass_damping.alpha": alpha})
+
+    assert implausible(damped(8.0)) is None                          # Blender air_damping 10 at 24 fps, 0.3 kg
+    assert "0.04 m/s" in implausible(damped(277.0))
+    assert implausible(Trial(["wind"], 0.008, 1.0, 0.01, {"material.density": 0.2})) is None
+    drag = Trial(["air_drag"], 0.008, 1.0, 0.01, {"material.density": 0.2, "air_drag.coef": 0.6})
+    assert implausible(drag) is None
+    drag.values["air_drag.coef"] = 100.0
+    assert "0.14 m/s" in implausible(drag)
+    joint = Trial(["wind", "mass_damping"], 0.008, 1.0, 0.01, {"material.density": 0.2, "mass_damping.alpha": 50.0})
+    assert implausible(joint) is not None
