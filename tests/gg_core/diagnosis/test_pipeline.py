@@ -1,9 +1,14 @@
 """Which candidates get a refit, and when a refit counts as confirmed."""
 from __future__ import annotations
 
+import numpy as np
+import pytest
+
 from gg_core.diagnosis.confirm import Trial
+from gg_core.diagnosis.library import loss_factor
 from gg_core.diagnosis.pipeline import confirmed, implausible, propose
 from gg_core.diagnosis.selection import Selection
+from gg_core.physics.cloth import Cloth
 
 
 def _selection() -> Selection:
@@ -25,18 +30,38 @@ def test_confirmation_needs_the_heldout_gain_and_better_training_rollouts():
     assert not confirmed(Trial(["a"], 0.0080, 1.0, 0.0125), null, 0.10)   # lucky on the held-out sequence only
 
 
-def test_damping_that_stops_cloth_falling_is_not_air():
-    """Terminal speed g / alpha: 1/s (default) falls at 9.8 m/s, 277/s (fitted to registration jitter) at 3.5 cm/s;
+@pytest.fixture(scope="module")
+def sheet() -> Cloth:
+    """1 m x 1 m sheet, 0.1 m edges and diagonals (sum of edge lengths 22 + 10 sqrt(2) = 36.1 m)."""
+    u, v = np.meshgrid(np.linspace(0, 1, 11), np.linspace(0, 1, 11))
+    verts = np.stack([u.ravel(), np.zeros(u.size), v.ravel()], 1)
+    q = np.arange(110).reshape(10, 11)[:, :10].ravel()
+    faces = np.concatenate([np.stack([q, q + 1, q + 12], 1), np.stack([q, q + 12, q + 11], 1)])
+    return Cloth(verts, faces)
+
+
+def test_damping_that_stops_cloth_falling_is_not_air(sheet):
+    """Terminal speed g / alpha: 8/s falls at 1.2 m/s, 277/s (fitted to registration jitter) at 3.5 cm/s;
     quadratic drag sqrt(rho_area g / coef): 0.2 kg/m^2 at coef 0.6 falls at 1.8 m/s, at coef 100 at 0.14 m/s."""
     def damped(alpha: float) -> Trial:
         return Trial(["mass_damping"], 0.008, 1.0, 0.01, {"material.density": 0.2, "mass_damping.alpha": alpha})
 
-    assert implausible(damped(8.0)) is None                          # Blender air_damping 10 at 24 fps, 0.3 kg
-    assert "0.04 m/s" in implausible(damped(277.0))
-    assert implausible(Trial(["wind"], 0.008, 1.0, 0.01, {"material.density": 0.2})) is None
+    assert implausible(damped(8.0), sheet) is None                   # Blender air_damping 10 at 24 fps, 0.3 kg
+    assert "0.04 m/s" in implausible(damped(277.0), sheet)
+    assert implausible(Trial(["wind"], 0.008, 1.0, 0.01, {"material.density": 0.2}), sheet) is None
     drag = Trial(["air_drag"], 0.008, 1.0, 0.01, {"material.density": 0.2, "air_drag.coef": 0.6})
-    assert implausible(drag) is None
+    assert implausible(drag, sheet) is None
     drag.values["air_drag.coef"] = 100.0
-    assert "0.14 m/s" in implausible(drag)
+    assert "0.14 m/s" in implausible(drag, sheet)
     joint = Trial(["wind", "mass_damping"], 0.008, 1.0, 0.01, {"material.density": 0.2, "mass_damping.alpha": 50.0})
-    assert implausible(joint) is not None
+    assert implausible(joint, sheet) is not None
+
+
+def test_membrane_damping_more_viscous_than_elastic_is_not_cloth(sheet):
+    """Loss factor 2 pi f beta sum(L) / (4 h (mu + lam) A): with mu + lam = 1e4 Pa and h = 4.7e-4 m, k = 18.8 N
+    per unit strain; beta 0.01 N s gives 0.12, beta 0.13 N s (a noisy-data refit) 1.6."""
+    values = {"material.mu": 5e3, "material.lam": 5e3, "strain_rate_damping.beta": 0.01}
+    assert loss_factor(values, sheet) == pytest.approx(2 * np.pi * 0.01 * (22 + 10 * np.sqrt(2)) / (4 * 4.7e-4 * 1e4), rel=1e-3)
+    assert implausible(Trial(["strain_rate_damping"], 0.008, 1.0, 0.01, values), sheet) is None
+    values["strain_rate_damping.beta"] = 0.13
+    assert "viscous" in implausible(Trial(["strain_rate_damping"], 0.008, 1.0, 0.01, values), sheet)
