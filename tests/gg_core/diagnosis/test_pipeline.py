@@ -6,7 +6,7 @@ import pytest
 
 from gg_core.diagnosis.confirm import Trial
 from gg_core.diagnosis.library import loss_factor
-from gg_core.diagnosis.pipeline import confirmed, implausible, propose, start
+from gg_core.diagnosis.pipeline import confirmed, implausible, propose
 from gg_core.diagnosis.selection import Selection
 from gg_core.physics.cloth import Cloth
 
@@ -69,6 +69,3 @@ def test_membrane_damping_more_viscous_than_elastic_is_not_cloth(sheet):
     values["strain_rate_damping.beta"] = 0.13
     assert "viscous" in implausible(Trial(["strain_rate_damping"], 0.008, 1.0, 0.01, values), sheet)
 
-
-def test_trials_start_from_the_probe_size_where_the_regression_put_zero():
-    assert start(np.array([0.0, 2.5]), np.array([0.3, 0.4])).tolist() == [0.3, 2.5]
