@@ -31,6 +31,7 @@ from typing import Callable, Iterator
 import numpy as np
 import torch
 
+from ..geometry.topology import face_areas
 from ..physics.cloth import Cloth, Rest
 from ..physics.forces import TERMS
 from ..physics.material import Material
@@ -187,43 +188,37 @@ def _added_term(term: str, key: str) -> Callable[[np.ndarray, Context], ModelCha
     return model
 
 
-def _terminal_speed(speed: Callable[[dict[str, object]], float]) -> Callable[[dict[str, object], Cloth], str | None]:
-    def check(values: dict[str, object], cloth: Cloth) -> str | None:
-        v = speed(values)
-        if v >= MIN_TERMINAL_SPEED:
-            return None
-        return (f"cloth would fall at {v:.2f} m/s in still air (fabrics fall faster than {MIN_TERMINAL_SPEED} m/s):"
-                f" the term makes the garment follow the body")
-
-    return check
+def _falls_too_slowly(speed: float) -> str | None:
+    """The reason, if cloth with this terminal speed (m/s) in still air is not cloth in air."""
+    if speed >= MIN_TERMINAL_SPEED:
+        return None
+    return (f"cloth would fall at {speed:.2f} m/s in still air (fabrics fall faster than {MIN_TERMINAL_SPEED} m/s): "
+            f"the term makes the garment follow the body")
 
 
-def _linear_terminal_speed(values: dict[str, object]) -> float:
-    """g / alpha: the speed at which -alpha m v balances gravity."""
+def _linear_damping(values: dict[str, object], cloth: Cloth) -> str | None:
+    """Terminal speed g / alpha: where -alpha m v balances gravity."""
     alpha = float(values["mass_damping.alpha"])
-    return GRAVITY / alpha if alpha > 0 else np.inf
-
-
-def _quadratic_terminal_speed(values: dict[str, object]) -> float:
-    """sqrt(rho_area g / coef), face-on: coef A v^2 balances the weight rho_area A g."""
-    coef = float(values["air_drag.coef"])
-    return float(np.sqrt(float(values["material.density"]) * GRAVITY / coef)) if coef > 0 else np.inf
+    return _falls_too_slowly(GRAVITY / alpha if alpha > 0 else np.inf)
 
 
 def _quadratic_drag(values: dict[str, object], cloth: Cloth) -> str | None:
-    drag_coefficient = 2.0 * float(values["air_drag.coef"]) / AIR_DENSITY
+    """Drag coefficient 2 coef / rho_air, then terminal speed sqrt(rho_area g / coef), face-on: where
+    coef A v^2 balances the weight rho_area A g."""
+    coef = float(values["air_drag.coef"])
+    drag_coefficient = 2.0 * coef / AIR_DENSITY
     if drag_coefficient > MAX_DRAG_COEFFICIENT:
         return (f"drag coefficient C_d {drag_coefficient:.2g} in air (no shape exceeds {MAX_DRAG_COEFFICIENT}): "
                 f"the term stands in for something other than air")
-    return _terminal_speed(_quadratic_terminal_speed)(values, cloth)
+    return _falls_too_slowly(float(np.sqrt(float(values["material.density"]) * GRAVITY / coef)) if coef > 0
+                             else np.inf)
 
 
 def loss_factor(values: dict[str, object], cloth: Cloth) -> float:
     """Loss tangent omega c / k of the membrane's uniform expansion mode at MOTION_FREQUENCY: every edge strain
     eps, stiffness k = 4 h (mu + lam) A (StVK, Green strain eps I), damping c = beta sum(L) (strain_rate_damping's
     dissipation 0.5 beta L eps_dot^2 per edge)."""
-    tri = cloth.template[cloth.faces]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
+    area = face_areas(cloth.template, cloth.faces).sum()
     stiffness = 4.0 * cloth.thickness * (float(values["material.mu"]) + float(values["material.lam"])) * area
     damping = float(values["strain_rate_damping.beta"]) * float(cloth.rest_lengths.sum())
     return 2.0 * np.pi * MOTION_FREQUENCY * damping / stiffness
@@ -287,7 +282,7 @@ CANDIDATES: tuple[Candidate, ...] = (
               "uniform density): everywhere, in all directions, proportional to speed",
               ("alpha",), "1/s", (0.0, np.inf),
               _term_columns("mass_damping", [{"alpha": 1.0}]), _added_term("mass_damping", "alpha"),
-              plausibility=_terminal_speed(_linear_terminal_speed)),
+              plausibility=_linear_damping),
     Candidate("strain_rate_damping", "material_damping",
               "internal damping against the edge strain rate: stretch waves and impacts, zero for rigid motion",
               ("beta",), "N s", (0.0, np.inf),

@@ -39,7 +39,7 @@ class Result:
     baseline: dict[str, float]
     nuisance: dict[str, float]
     batch: FrameBatch
-    cloth: Cloth                       # the baseline's (rest shape for plausibility checks)
+    unphysical: dict[str, str]         # trial name -> why its refitted values are not cloth (never accepted)
     progress: Progress
     reference: dict[str, Trial] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
@@ -87,7 +87,7 @@ class Result:
                 "heldout_l2": None if t is None else t.heldout_l2,
                 "heldout_gain": None if t is None else self.gain(t),
                 "train_rollout_gain": None if t is None else self.train_gain(t),
-                "implausible": None if t is None else implausible(t, self.cloth),
+                "implausible": self.unphysical.get(n),
             })
         return out
 
@@ -190,15 +190,19 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
         trials[n] = trial(sim, BASELINE_FIT, [(BY_NAME[n], sel.alone[n])], ctx, loc.region, train, heldout,
                           attached, req.refit_iterations, req.max_samples)
         progress.step(f"trial {n}: held-out L2 {before * 1e3:.1f} -> {trials[n].heldout_l2 * 1e3:.1f} mm")
-    passing = sorted((n for n in proposed if confirmed(trials[n], null, req.min_gain)
-                      and implausible(trials[n], sim.cloth) is None), key=lambda n: trials[n].heldout_l2)
+    unphysical = {n: why for n in proposed if (why := implausible(trials[n], sim.cloth))}
+    passing = sorted((n for n in proposed if confirmed(trials[n], null, req.min_gain) and n not in unphysical),
+                     key=lambda n: trials[n].heldout_l2)
     accepted, after = passing[:1], (trials[passing[0]].heldout_l2 if passing else before)
     if len(passing) > 1 and BY_NAME[passing[0]].equivalence != BY_NAME[passing[1]].equivalence:
         pair = fit(gram(design), passing[:2], BY_NAME).coefs
         joint = trial(sim, BASELINE_FIT, [(BY_NAME[n], pair[n]) for n in passing[:2]], ctx, loc.region, train,
                       heldout, attached, req.refit_iterations, req.max_samples)
-        trials["+".join(passing[:2])] = joint
-        if confirmed(joint, trials[passing[0]], req.min_gain) and implausible(joint, sim.cloth) is None:
+        joint_name = "+".join(passing[:2])
+        trials[joint_name] = joint
+        if why := implausible(joint, sim.cloth):
+            unphysical[joint_name] = why
+        elif confirmed(joint, trials[passing[0]], req.min_gain):
             accepted, after = passing[:2], joint.heldout_l2
     timings["trials_s"] = time.perf_counter() - t0
 
@@ -214,7 +218,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     baseline["heldout_l2_global_fit"] = baseline_l2
     baseline.update(starts)
     return Result(loc, sel, trials, accepted, null, after, baseline, dict(zip(labels, adjust.tolist())), batch,
-                  sim.cloth, progress, reference, timings)
+                  unphysical, progress, reference, timings)
 
 
 def confirmed(t: Trial, reference: Trial, min_gain: float) -> bool:
