@@ -36,6 +36,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-samples", type=int, default=24, help="teacher-forced frames per fit evaluation")
     parser.add_argument("--min-gain", type=float, default=0.10,
                         help="relative held-out rollout improvement an effect needs to be accepted")
+    parser.add_argument("--min-gain-mm", type=float, default=0.5,
+                        help="absolute held-out rollout improvement (mm) an effect needs as well")
     parser.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates")
     parser.add_argument("--fps", type=float, default=30.0, help="frame rate of the sequences")
     parser.add_argument("--substeps", type=int, default=2, help="implicit steps per frame (fits and rollouts)")
@@ -51,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
                           denoise=args.denoise, attach_tol_mm=args.attach_tol_mm, fps=args.fps,
                           substeps=args.substeps, seed=args.seed,
                           baseline_iterations=args.baseline_iterations, refit_iterations=args.refit_iterations,
-                          max_samples=args.max_samples, min_gain=args.min_gain, bootstrap=args.bootstrap,
+                          max_samples=args.max_samples, min_gain=args.min_gain,
+                          min_gain_mm=args.min_gain_mm, bootstrap=args.bootstrap,
                           progress=args.progress)
     report = run_diagnose(req)
     if args.progress != "jsonl":

@@ -126,7 +126,15 @@ def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, bo
     The teacher-forced loss starts every step from an observed state, so with noisy positions near the body the
     contact margin has several local minima (measured on a capture with 1.5 mm noise: the fit stayed at the 3 mm
     start, held-out 14.8 mm, where from other starts it reaches 12-13 mm, held-out 12.6 mm, as on clean data).
-    Free rollouts average the noise out, so they choose between the starts."""
+    Free rollouts average the noise out, so they choose between the starts.
+
+    Measured and not kept: internal (strain-rate) damping fitted here with the material. On Blender captures with
+    nothing hidden it lowered held-out errors by 30 % (11.2 -> 7.8 mm clean, 15.0 -> 10.0 mm at 1.5 mm noise) and
+    ended the false alarms there, but its strength is absolute while the material's scale is free: the fit drifts
+    along that scale (density to its lower bound) to loss factors of 2-15 and absorbed a gravity tilt (small
+    Blender test capture: the tilt trial gained 1 %); hidden air damping was missed on 3 of 4 bench captures
+    (the true effect would have gained 24-27 %). Stiffness-proportional damping with a bounded loss factor would
+    not have that freedom."""
     collider = BodyCollider(body_faces, train[0].body.shape[1], exclude=hands)
     best, starts = None, {}
     for scale in MARGIN_STARTS:
@@ -191,7 +199,9 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
                           attached, req.refit_iterations, req.max_samples)
         progress.step(f"trial {n}: held-out L2 {before * 1e3:.1f} -> {trials[n].heldout_l2 * 1e3:.1f} mm")
     unphysical = {n: why for n in proposed if (why := implausible(trials[n], sim.cloth))}
-    passing = sorted((n for n in proposed if confirmed(trials[n], null, req.min_gain) and n not in unphysical),
+    passing = sorted((n for n in proposed
+                      if confirmed(trials[n], null, req.min_gain, req.min_gain_mm)
+                      and n not in unphysical),
                      key=lambda n: trials[n].heldout_l2)
     accepted, after = passing[:1], (trials[passing[0]].heldout_l2 if passing else before)
     if len(passing) > 1 and BY_NAME[passing[0]].equivalence != BY_NAME[passing[1]].equivalence:
@@ -202,7 +212,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
         trials[joint_name] = joint
         if why := implausible(joint, sim.cloth):
             unphysical[joint_name] = why
-        elif confirmed(joint, trials[passing[0]], req.min_gain):
+        elif confirmed(joint, trials[passing[0]], req.min_gain, req.min_gain_mm):
             accepted, after = passing[:2], joint.heldout_l2
     timings["trials_s"] = time.perf_counter() - t0
 
@@ -221,9 +231,13 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
                   unphysical, progress, reference, timings)
 
 
-def confirmed(t: Trial, reference: Trial, min_gain: float) -> bool:
-    """The trial beats `reference` by `min_gain` on held-out rollouts and at all on the training rollouts."""
-    return t.heldout_l2 <= (1.0 - min_gain) * reference.heldout_l2 and t.train_l2 < reference.train_l2
+def confirmed(t: Trial, reference: Trial, min_gain: float, min_gain_mm: float) -> bool:
+    """The trial beats `reference` on held-out rollouts by the share `min_gain` and by `min_gain_mm`, and at all on
+    the training rollouts. The absolute floor matters where the baseline already matches: on a capture of our own
+    simulator with nothing hidden, a better-converged baseline refit reached 0.22 mm and anisotropy 'gained' 51 %
+    (0.11 mm)."""
+    needed = min((1.0 - min_gain) * reference.heldout_l2, reference.heldout_l2 - 1e-3 * min_gain_mm)
+    return t.heldout_l2 <= needed and t.train_l2 < reference.train_l2
 
 
 def implausible(t: Trial, cloth: Cloth) -> str | None:

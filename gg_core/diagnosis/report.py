@@ -144,6 +144,7 @@ def write_html(path: Path, report: dict, vertices: np.ndarray, faces: np.ndarray
         verdict += (f"<p>Estimated position noise: {html.escape(levels)}; "
                     + ("sequences smoothed in time (Savitzky-Golay, {window} frames, ends dropped).".format(
                         **noise["filter"]) if noise["smoothed"] else "no smoothing.") + "</p>")
+    verdict += _baseline_paragraph(report["baseline"])
     loc = report["localization"]
     rows = "".join(
         f"<tr><td>{html.escape(e['name'])}</td><td>{html.escape(e['class'])}</td><td>{e['evidence']['explained']:.1%}"
@@ -170,6 +171,15 @@ td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc
     with atomic_path(path) as tmp:
         tmp.write_text(page)
     return Path(path)
+
+
+def _baseline_paragraph(baseline: dict) -> str:
+    """What every gain is measured against: the global fit, internal damping included."""
+    fitted = ", ".join(f"{k} {_fmt(baseline[k])}" for k in ("density", "mu", "lam", "bending", "collision.margin",
+                                                            "strain_rate_damping.beta") if k in baseline)
+    eta = baseline.get("internal_damping_loss_factor")
+    damping = "" if eta is None else f" The fitted internal damping has a loss factor of {eta:.2g} at 1 Hz."
+    return f"<p>Baseline (global parameters only, SI units): {html.escape(fitted)}.{damping}</p>"
 
 
 def _pct(gain: float | None) -> str:

@@ -34,6 +34,7 @@ class Rest:
 
     faces: torch.Tensor          # [F,3] long
     edges: torch.Tensor          # [E,2] long
+    face_edges: torch.Tensor     # [F,3] long: edge joining corners k and k+1 of each face
     hinges: torch.Tensor         # [H,4] long
     rest_lengths: torch.Tensor   # [E]
     template: torch.Tensor       # [V,3] template positions (material directions live there)
@@ -173,7 +174,8 @@ class Cloth:
         le = self.rest_lengths[torch.from_numpy(topo.hinge_edges)]
         coef = bend * le ** 2 / (8 * area[hinge_faces].sum(-1))
         rest_angle = torch.zeros_like(coef) if self.flat else self.template_angles
-        return Rest(faces=faces, edges=torch.from_numpy(topo.edges), hinges=hinges, rest_lengths=self.rest_lengths,
+        return Rest(faces=faces, edges=torch.from_numpy(topo.edges), face_edges=fe, hinges=hinges,
+                    rest_lengths=self.rest_lengths,
                     template=torch.from_numpy(self.template), thickness=self.thickness,
                     face_rest_sq=L ** 2, face_area=area, strain_basis=basis, stretch_c=c,
                     mass=mat.density * vertex_area, vertex_area=vertex_area, hinge_coef=coef, rest_angle=rest_angle)

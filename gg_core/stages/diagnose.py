@@ -11,7 +11,8 @@ it through the force library, refit, and show the held-out rollout error before 
 4. Selection: forward sparse regression on the candidate library with a moving-block bootstrap.
 5. Confirmation: the selected candidates, then the others by the share of the residual they explain, up to
    `max_trials`, are each added to the simulator and refitted; the best is accepted only if the held-out
-   rollout error drops by at least `min_gain` and the training sequences' free rollouts improve too.
+   rollout error drops by at least `min_gain` (and `min_gain_mm`) and the training sequences' free rollouts
+   improve too.
 
 Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply, `--source registered`) or, for synthetic captures,
 the ground-truth meshes (`--source gt`), optionally with spatially correlated noise. truth.json is read only for
@@ -63,7 +64,9 @@ class DiagnoseRequest:
     probe_acceleration: float = 0.5    # m/s^2: size of the model changes whose responses form the regression
     min_explained: float = 0.05        # share of the residual a selected candidate must explain
     min_inclusion: float = 0.5         # bootstrap inclusion probability a candidate needs to be tried
-    min_gain: float = 0.10             # relative held-out rollout improvement needed to accept
+    min_gain: float = 0.10             # relative held-out rollout improvement needed to accept ...
+    min_gain_mm: float = 0.5           # ... and absolute (below this the rollouts already match the recording
+                                       # within what registered positions are measured to)
     max_trials: int = 12               # candidates refitted and judged on rollouts (12: every one that acts)
     bootstrap: int = 100
     reference: list[str] = field(default_factory=list)   # candidates always trialled (benchmarks), never accepted

@@ -25,9 +25,11 @@ def test_selected_candidates_come_first_then_the_others_by_explained_share_even_
 
 def test_confirmation_needs_the_heldout_gain_and_better_training_rollouts():
     null = Trial([], heldout_l2=0.010, train_loss=1.0, train_l2=0.012)
-    assert confirmed(Trial(["a"], 0.0085, 1.0, 0.011), null, 0.10)
-    assert not confirmed(Trial(["a"], 0.0095, 1.0, 0.011), null, 0.10)    # held-out gain 5 % < 10 %
-    assert not confirmed(Trial(["a"], 0.0080, 1.0, 0.0125), null, 0.10)   # lucky on the held-out sequence only
+    assert confirmed(Trial(["a"], 0.0085, 1.0, 0.011), null, 0.10, 0.5)
+    assert not confirmed(Trial(["a"], 0.0095, 1.0, 0.011), null, 0.10, 0.5)    # held-out gain 5 % < 10 %
+    assert not confirmed(Trial(["a"], 0.0080, 1.0, 0.0125), null, 0.10, 0.5)   # lucky on the held-out sequence only
+    tiny = Trial([], 0.00022, 1.0, 0.0002)                              # the baseline already matches
+    assert not confirmed(Trial(["a"], 0.00011, 1.0, 0.0001), tiny, 0.10, 0.5)   # 51 %, but 0.11 mm
 
 
 @pytest.fixture(scope="module")

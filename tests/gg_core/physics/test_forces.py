@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from gg_core.physics.cloth import GRAVITY, Cloth
 from gg_core.physics.forces import DEFAULT_TERMS, LIBRARY, TERMS, make_terms
@@ -67,8 +68,37 @@ def test_gravity_offset_adds_acceleration():
     np.testing.assert_allclose(accel, np.array(GRAVITY) + [1.0, 0.0, 0.0], atol=1e-3)
 
 
-def test_damping_terms_do_not_act_on_rigid_motion():
-    """Strain-rate damping resists deformation only: a rigidly falling sheet accelerates at g."""
-    vel, fps = _fall(["strain_rate_damping"], {"strain_rate_damping": {"beta": 1.0}}, seconds=1.0)
+@pytest.mark.parametrize("term,params", [("strain_rate_damping", {"beta": 1.0}), ("viscoelastic_damping", {"tau": 0.1})])
+def test_damping_terms_do_not_act_on_rigid_motion(term, params):
+    """Internal damping resists deformation only: a rigidly falling sheet accelerates at g."""
+    vel, fps = _fall([term], {term: params}, seconds=1.0)
     accel = np.diff(vel, axis=0).mean(0) * fps
     np.testing.assert_allclose(accel, GRAVITY, atol=1e-3)
+
+
+def test_viscoelastic_damping_is_tau_times_each_edge_stiffness():
+    """k_e = d^2 psi / dl_e^2 at rest (finite differences of the stretching energy with one edge's rest length
+    changed: at rest only d q / d L enters, as for d q / d l); the torch and numpy coefficients agree, and scaling
+    the material scales the damping with it."""
+    from gg_core.physics.energies import Stretching
+    from gg_core.physics.forces import ViscoelasticDamping
+    v, f = sheet(2, 2, 0.5, 0.5, y=0.0)
+    cloth = Cloth(v, f)
+    term = ViscoelasticDamping(tau=0.05)
+    beta = term._beta(cloth.rest()).detach().numpy()
+    np.testing.assert_allclose(term._beta_numeric(cloth.numeric()), beta, rtol=1e-12)
+    e, h = 3, 1e-5
+    x = torch.from_numpy(v)
+    base, energies = cloth.rest_lengths.clone(), []
+    for d in (-h, 0.0, h):
+        lengths = base.clone()
+        lengths[e] = lengths[e] - d                        # x stretched by d relative to rest along edge e
+        cloth.rest_lengths = lengths
+        energies.append(float(Stretching().energy(x, None, cloth.rest())))
+    cloth.rest_lengths = base
+    stiffness = (energies[0] - 2 * energies[1] + energies[2]) / h ** 2
+    L = float(base[e])
+    assert beta[e] == pytest.approx(0.05 * stiffness * L, rel=1e-3)
+    cloth.material = type(cloth.material)(**{k: getattr(cloth.material, k) * 3.0 for k in ("density", "mu", "lam",
+                                                                                         "bending")})
+    np.testing.assert_allclose(term._beta(cloth.rest()).detach().numpy(), 3.0 * beta, rtol=1e-12)
