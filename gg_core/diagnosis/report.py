@@ -176,7 +176,7 @@ td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc
 def _baseline_paragraph(baseline: dict) -> str:
     """What every gain is measured against: the global fit, internal damping included."""
     fitted = ", ".join(f"{k} {_fmt(baseline[k])}" for k in ("density", "mu", "lam", "bending", "collision.margin",
-                                                            "strain_rate_damping.beta") if k in baseline)
+                                                            "viscoelastic_damping.tau") if k in baseline)
     eta = baseline.get("internal_damping_loss_factor")
     damping = "" if eta is None else f" The fitted internal damping has a loss factor of {eta:.2g} at 1 Hz."
     return f"<p>Baseline (global parameters only, SI units): {html.escape(fitted)}.{damping}</p>"

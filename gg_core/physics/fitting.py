@@ -37,6 +37,19 @@ class Observed:
     fps: float
 
 
+def _limited(term: Term, key: str, raw: torch.Tensor) -> torch.Tensor:
+    """A fitted positive term parameter below its physical limit (Term.limits): raw / (1 + raw / limit), which is
+    raw while small and approaches the limit smoothly (a hard clip would stop the gradient)."""
+    limit = term.limits.get(key)
+    return raw if limit is None else raw / (1.0 + raw / limit)
+
+
+def _raw(term: Term, key: str, value: torch.Tensor) -> torch.Tensor:
+    """Inverse of _limited (a start at or above the limit starts just below it)."""
+    limit = term.limits.get(key)
+    return value if limit is None else value / (1.0 - torch.clamp(value / limit, max=0.99))
+
+
 class BehaviorParams:
     """Latents of a cloth's behaviour and their mapping onto a Cloth and its terms (differentiable).
 
@@ -57,7 +70,8 @@ class BehaviorParams:
             name, _, key = spec.partition(".")
             if name not in by_name or key not in by_name[name].params:
                 raise ValueError(f"cannot fit '{spec}': the simulator has no such term parameter")
-            self.term_refs.append((by_name[name], key, by_name[name].params[key].detach().clone()))
+            term = by_name[name]
+            self.term_refs.append((term, key, _raw(term, key, term.params[key].detach().clone())))
         self.term_s = torch.zeros(len(self.term_refs), dtype=torch.float64)
         self._edges = torch.from_numpy(cloth.topology.edges)
 
@@ -69,7 +83,7 @@ class BehaviorParams:
         cloth.material = Material(**{n: from_latent(n, z[k]) for k, n in enumerate(MATERIAL_NAMES)})
         cloth.rest_lengths = self.base_rest * torch.exp(self.edge_s)
         for (term, key, init), s in zip(self.term_refs, self.term_s):
-            term.params[key] = init * torch.exp(s)
+            term.params[key] = _limited(term, key, init * torch.exp(s))
 
     def regularizer(self, w_offset: float, w_smooth: float, w_rest: float) -> torch.Tensor:
         """Keeps the per-vertex and per-edge fields small and smooth (they could otherwise absorb noise)."""
@@ -81,7 +95,7 @@ class BehaviorParams:
         return {n: float(from_latent(n, self.global_z[k].detach())) for k, n in enumerate(MATERIAL_NAMES)}
 
     def term_values(self) -> dict[str, float]:
-        return {f"{term.name}.{key}": float(init * torch.exp(s.detach()))
+        return {f"{term.name}.{key}": float(_limited(term, key, init * torch.exp(s.detach())))
                 for (term, key, init), s in zip(self.term_refs, self.term_s)}
 
     def state(self) -> dict[str, torch.Tensor]:

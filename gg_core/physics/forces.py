@@ -179,6 +179,9 @@ class ViscoelasticDamping(StrainRateDamping):
 
     name = "viscoelastic_damping"
     defaults = {"tau": 0.01}
+    # fabrics are viscoelastic solids (loss tangent typically below 0.3): a fit may not make the membrane more
+    # viscous than elastic (loss factor 1) at walking and swinging frequencies (1 Hz)
+    limits = {"tau": 1.0 / (2.0 * np.pi * 1.0)}
 
     def _beta(self, rest) -> Any:
         diag = rest.stretch_c.diagonal(dim1=-2, dim2=-1)

@@ -109,6 +109,7 @@ class Term(ABC):
 
     name: ClassVar[str]
     defaults: ClassVar[dict[str, Any]] = {}
+    limits: ClassVar[dict[str, float]] = {}     # upper physical limits of positive parameters (fits stay below)
 
     def __init__(self, **params: Any) -> None:
         unknown = set(params) - set(self.defaults)

@@ -108,3 +108,22 @@ def test_fitting_recovers_a_force_term_parameter():
     default_density = MATERIAL_SPEC["density"][0]
     assert params.term_values()["air_drag.coef"] / fitted["density"] == pytest.approx(1.5 / default_density, rel=0.05)
     assert fitted["mu"] / fitted["density"] == pytest.approx(MATERIAL_SPEC["mu"][0] / default_density, rel=0.05)
+
+
+def test_limited_term_parameters_start_where_given_and_stay_below_their_limit():
+    """Kelvin-Voigt damping may not exceed loss factor 1 at 1 Hz (tau 0.159 s): the fitted value is the given one
+    at the start, and no latent step takes it past the limit."""
+    from gg_core.physics.forces import ViscoelasticDamping
+
+    v, f = sheet(2, 2, 0.4, 0.4)
+    cloth = Cloth(v, f)
+    term = ViscoelasticDamping(tau=0.05)
+    params = BehaviorParams(cloth, terms=[term], term_params=("viscoelastic_damping.tau",))
+    params.apply(cloth)
+    assert float(term.params["tau"]) == pytest.approx(0.05, rel=1e-12)
+    limit = ViscoelasticDamping.limits["tau"]
+    for s in (2.0, 10.0, 50.0):
+        params.term_s.data[:] = s
+        params.apply(cloth)
+        assert 0.05 < float(term.params["tau"]) <= limit
+    assert params.term_values()["viscoelastic_damping.tau"] == pytest.approx(limit, rel=1e-6)
