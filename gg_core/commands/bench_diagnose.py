@@ -46,6 +46,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--vertices", type=int, default=600, help="garment template vertex count")
     parser.add_argument("--garment", default="skirt", help="garment template of gg_core.synth.garments")
     parser.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates of each diagnosis")
+    parser.add_argument("--fit-horizon", type=int, default=3,
+                        help="frames each fitted observed state is predicted ahead (gg diagnose --fit-horizon)")
 
 
 def preset(frames: int, vertices: int):
@@ -127,6 +129,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
                 np.save(region_path, (z[region_name] > 0).astype(np.float64))
     report = json.loads(run_diagnose(DiagnoseRequest(
         capture=capture, project=project, noise_mm=noise, seed=seed, bootstrap=args.bootstrap,
+        fit_horizon=args.fit_horizon,
         reference=reference, reference_region=region_path, progress="none")).read_text())
     predicted = report["accepted_classes"][0] if report["accepted_classes"] else "none"
     accepted = next((e for e in report["effects"] if report["accepted"] and e["name"] == report["accepted"][0]),

@@ -33,7 +33,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="L-BFGS iterations of the global baseline fit")
     parser.add_argument("--refit-iterations", type=int, default=8,
                         help="L-BFGS iterations of each confirming refit")
-    parser.add_argument("--max-samples", type=int, default=24, help="teacher-forced frames per fit evaluation")
+    parser.add_argument("--max-samples", type=int, default=12, help="observed states per fit evaluation")
+    parser.add_argument("--fit-horizon", type=int, default=3,
+                        help="frames each of them is predicted ahead (more: damping shows; cost grows with it)")
     parser.add_argument("--min-gain", type=float, default=0.10,
                         help="relative held-out rollout improvement an effect needs to be accepted")
     parser.add_argument("--min-gain-mm", type=float, default=0.5,
@@ -53,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
                           denoise=args.denoise, attach_tol_mm=args.attach_tol_mm, fps=args.fps,
                           substeps=args.substeps, seed=args.seed,
                           baseline_iterations=args.baseline_iterations, refit_iterations=args.refit_iterations,
-                          max_samples=args.max_samples, min_gain=args.min_gain,
+                          max_samples=args.max_samples, fit_horizon=args.fit_horizon, min_gain=args.min_gain,
                           min_gain_mm=args.min_gain_mm, bootstrap=args.bootstrap,
                           progress=args.progress)
     report = run_diagnose(req)

@@ -2,8 +2,8 @@
 
 A trial copies the baseline simulator, switches the candidates' force-library terms on (or scales the region's
 material fields), and refits the global material together with the candidates' coefficients on the training
-sequences (teacher-forced one-frame loss, L-BFGS, warm-started from the baseline and the regression's
-coefficients). Its held-out rollout error decides: an effect is accepted only if it lowers the error by at least
+sequences (teacher-forced prediction a few frames ahead of observed states, L-BFGS, warm-started from the baseline
+and the regression's coefficients). Its held-out rollout error decides: an effect is accepted only if it lowers the error by at least
 `min_gain` relative to the baseline, and also lowers the free-rollout error of the training sequences (a real
 effect helps every recording; a term that only helps the held-out one got lucky among the many tried). The
 regression only proposes; rollouts decide, which also protects against effects that fit single frames but drift
@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from ..physics.cloth import Cloth
-from ..physics.fitting import BehaviorParams, Observed, TeacherForced, minimize_lbfgs, rollout_error
+from ..physics.fitting import BehaviorParams, FitConfig, Observed, TeacherForced, minimize_lbfgs, rollout_error
 from ..physics.material import MATERIAL_NAMES
 from ..physics.simulator import ImplicitSimulator
 from .library import Candidate, Context, ModelChange, apply_region, with_terms
@@ -73,22 +73,23 @@ def merge(changes: list[ModelChange]) -> ModelChange:
 
 
 def refit(sim: ImplicitSimulator, params: BehaviorParams, train: list[Observed], trainable: list[torch.Tensor],
-          iterations: int, max_samples: int | None, seed: int = 0) -> float:
-    """L-BFGS on the teacher-forced loss over `trainable`; leaves the best parameters applied, returns its loss."""
-    problem = TeacherForced(sim, train, max_samples, seed)
-    if iterations <= 0:
+          config: FitConfig) -> float:
+    """L-BFGS on the teacher-forced loss (config: global_iterations, max_samples, seed, horizon) over `trainable`;
+    leaves the best parameters applied, returns its loss."""
+    problem = TeacherForced(sim, train, config.max_samples, config.seed, horizon=config.horizon)
+    if config.global_iterations <= 0:
         return problem.evaluate(params, [])[0]     # evaluating applies the parameters
 
     def evaluate() -> tuple[float, list[torch.Tensor]]:
         loss, _, grads = problem.evaluate(params, trainable)
         return loss, grads
 
-    return minimize_lbfgs(sim, params, trainable, evaluate, iterations)
+    return minimize_lbfgs(sim, params, trainable, evaluate, config.global_iterations)
 
 
 def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple[Candidate, np.ndarray]],
           ctx: Context, region: np.ndarray | None, train: list[Observed], heldout: list[Observed],
-          pinned: np.ndarray, iterations: int, max_samples: int | None) -> Trial:
+          pinned: np.ndarray, config: FitConfig) -> Trial:
     """Refit the baseline with the chosen candidates (initial coefficients given) and roll out the held-out
     sequences. `base_fit` are the term parameters the baseline fitted; the baseline simulator is left unchanged."""
     start = time.perf_counter()
@@ -100,7 +101,7 @@ def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple
     params = CandidateParams(cloth, sim, base_fit + change.fit, region, change.region)
     params.apply(cloth)
     sim.refresh()
-    loss = refit(sim, params, train, [params.global_z, params.term_s, params.region_s], iterations, max_samples)
+    loss = refit(sim, params, train, [params.global_z, params.term_s, params.region_s], config)
     error = float(np.mean([rollout_error(sim, obs, pinned) for obs in heldout]))
     train_error = float(np.mean([rollout_error(sim, obs, pinned) for obs in train]))
     return Trial([c.name for c, _ in chosen], error, loss, train_error, params.values(), time.perf_counter() - start)

@@ -110,10 +110,13 @@ class BehaviorParams:
 class _Sample:
     x: np.ndarray             # observed x_t
     v: np.ndarray             # observed velocity at t (frames t-1, t)
-    body: np.ndarray | None   # body at t
-    body_next: np.ndarray | None
-    target: np.ndarray        # observed x_{t+1} (also the pinned vertices' end positions)
+    body: np.ndarray | None   # body at t .. t+H [H+1,Vb,3]
+    target: np.ndarray        # observed x_{t+1} .. x_{t+H} [H,V,3] (also the pinned vertices' positions)
     first: StepInputs         # the first substep's inputs depend on observations only: prepared once
+
+    def observed(self, f: int) -> np.ndarray:
+        """Observed positions at frame t + f."""
+        return self.x if f == 0 else self.target[f - 1]
 
 
 @dataclass
@@ -124,18 +127,21 @@ class FitLog:
 
 
 class TeacherForced:
-    """One-frame prediction loss over observed sequences and its gradient in the behaviour parameters.
+    """Prediction loss over observed sequences, `horizon` frames ahead of each observed state, and its gradient
+    in the behaviour parameters.
 
     A frame is sim.substeps implicit steps, exactly as rollouts integrate it. The adjoint runs backwards through
     the substeps: each substep's end state solves grad E = 0, and its inputs x_prev, v_prev = (y_{s-1} -
     y_{s-2}) / h carry the sensitivity back to the earlier substeps (contact planes and normals are lagged
-    inputs, held fixed)."""
+    inputs, held fixed). With a horizon of several frames the loss compares every frame's end state, so
+    dissipation, which one frame barely shows, accumulates where the fit can see it."""
 
     def __init__(self, sim: ImplicitSimulator, sequences: list[Observed], max_samples: int | None = None,
-                 seed: int = 0, refinements: int = 3) -> None:
+                 seed: int = 0, refinements: int = 3, horizon: int = 1) -> None:
         self.sim = sim
+        self.horizon = horizon
         self.samples: list[_Sample] = []
-        frames = [(obs, t) for obs in sequences for t in range(1, len(obs.garment) - 1)]
+        frames = [(obs, t) for obs in sequences for t in range(1, len(obs.garment) - horizon)]
         if max_samples is not None and len(frames) > max_samples:
             keep = np.sort(np.random.default_rng(seed).choice(len(frames), max_samples, replace=False))
             frames = [frames[i] for i in keep]
@@ -143,29 +149,36 @@ class TeacherForced:
             g, b = obs.garment, obs.body
             if abs(1.0 / obs.fps - sim.dt * sim.substeps) > 1e-9:
                 raise ValueError(f"sequence {obs.name} runs at {obs.fps} fps, the simulator at {sim.fps}")
-            sample = _Sample(g[t], (g[t] - g[t - 1]) * obs.fps, None if b is None else b[t],
-                             None if b is None else b[t + 1], g[t + 1], first=None)
+            sample = _Sample(g[t], (g[t] - g[t - 1]) * obs.fps, None if b is None else b[t:t + horizon + 1],
+                             g[t + 1:t + horizon + 1], first=None)
             sample.first = self._prepare(sample, 0, sample.x, sample.v)
             self.samples.append(sample)
         self.free = sim.cloth.numeric().free
         self.refinements = refinements
 
-    def _prepare(self, s: _Sample, k: int, x: np.ndarray, v: np.ndarray) -> StepInputs:
-        """Inputs of substep k of a sample (body and pins interpolated linearly within the frame)."""
+    def _blend(self, s: _Sample, k: int) -> tuple[np.ndarray | None, np.ndarray]:
+        """Body and pin targets at the end of substep k (linear within each frame)."""
         n = self.sim.substeps
-        b0 = b1 = None
+        f, w = divmod(k, n)
+        w = (w + 1) / n
+        body = None if s.body is None else blend(s.body[f], s.body[f + 1], w)
+        return body, blend(s.observed(f), s.observed(f + 1), w)
+
+    def _prepare(self, s: _Sample, k: int, x: np.ndarray, v: np.ndarray) -> StepInputs:
+        """Inputs of substep k of a sample."""
+        b0 = None
         if s.body is not None:
-            b0, b1 = blend(s.body, s.body_next, k / n), blend(s.body, s.body_next, (k + 1) / n)
-        return self.sim.prepare(x, v, b0, b1, self.sim.dt, pin_target=blend(s.x, s.target, (k + 1) / n))
+            b0 = s.body[0] if k == 0 else self._blend(s, k - 1)[0]
+        b1, pins = self._blend(s, k)
+        return self.sim.prepare(x, v, b0, b1, self.sim.dt, pin_target=pins)
 
     def _frame(self, s: _Sample) -> list[tuple[np.ndarray, StepInputs]]:
-        """(end positions, inputs) of every substep of the sample's frame under the current parameters."""
+        """(end positions, inputs) of every substep of the sample's horizon under the current parameters."""
         sim, out = self.sim, []
         x, v = s.x, s.v
-        for k in range(sim.substeps):
+        for k in range(sim.substeps * self.horizon):
             step = sim.with_contact_force(s.first) if k == 0 else self._prepare(s, k, x, v)
-            body_end = None if s.body is None else blend(s.body, s.body_next, (k + 1) / sim.substeps)
-            y, step = sim.solve(step, body_end)
+            y, step = sim.solve(step, self._blend(s, k)[0])
             out.append((y, step))
             v = (y - x) / sim.dt
             x = y
@@ -180,15 +193,17 @@ class TeacherForced:
         sim.refresh()
         num = sim.num
         free = self.free[:, None]
-        scale = 1.0 / (len(self.samples) * max(float(self.free.sum()), 1.0))
+        n = sim.substeps
+        scale = 1.0 / (len(self.samples) * self.horizon * max(float(self.free.sum()), 1.0))
         chains, systems, loss, dist = [], [], 0.0, 0.0
-        rhs = []
+        rhs = [[] for _ in range(self.horizon)]
         for s in self.samples:
             chain = self._frame(s)
-            r = (chain[-1][0] - s.target) * free
-            loss += float((r * r).sum()) * scale
-            dist += float(np.linalg.norm(r, axis=1).sum()) * scale
-            rhs.append(2 * r * scale)
+            for f in range(self.horizon):
+                r = (chain[(f + 1) * n - 1][0] - s.target[f]) * free
+                loss += float((r * r).sum()) * scale
+                dist += float(np.linalg.norm(r, axis=1).sum()) * scale
+                rhs[f].append(2 * r * scale)
             chains.append(chain)
             if trainable:
                 per_step = []
@@ -204,7 +219,8 @@ class TeacherForced:
                 loss += regularizer().item()
         if not trainable:
             return loss, dist, []
-        grads = self._backward(params, trainable, chains, systems, np.stack(rhs))
+        grads = self._backward(params, trainable, chains, systems,
+                               {(f + 1) * n - 1: np.stack(r) for f, r in enumerate(rhs)})
         if regularizer is not None:
             for t in trainable:
                 t.requires_grad_(True)
@@ -215,18 +231,17 @@ class TeacherForced:
         return loss, dist, grads
 
     def _backward(self, params: BehaviorParams, trainable: list[torch.Tensor], chains: list, systems: list,
-                  mu_last: np.ndarray) -> list[torch.Tensor]:
-        """Reverse pass through the substeps of all samples at once (frames batched)."""
+                  mu: dict[int, np.ndarray]) -> list[torch.Tensor]:
+        """Reverse pass through the substeps of all samples at once (samples batched); `mu` holds the loss's
+        gradient in each substep's end state where the loss looks at it (frame ends)."""
         sim, cloth = self.sim, self.sim.cloth
-        n_sub = sim.substeps
         for t in trainable:
             t.requires_grad_(True)
         params.apply(cloth)
         rest = cloth.rest()
         grads = [torch.zeros_like(t) for t in trainable]
-        mu = {n_sub - 1: mu_last}
         free = torch.from_numpy(self.free)[None, :, None]
-        for k in range(n_sub - 1, -1, -1):
+        for k in range(len(chains[0]) - 1, -1, -1):
             y = torch.tensor(np.stack([c[k][0] for c in chains]), requires_grad=True)
             batch = StepInputs.stack([c[k][1] for c in chains])
             inputs = list(trainable)
@@ -304,6 +319,7 @@ class FitConfig:
     w_rest: float = 1e-2
     max_samples: int | None = 24
     seed: int = 0
+    horizon: int = 1            # frames each sample predicts (TeacherForced)
     # term parameters fitted with the global material: the garment-body contact thickness was measured to matter
     # as much as the material on Blender captures (its collision keeps cloth ~1 cm off the body)
     term_params: tuple[str, ...] = ("collision.margin",)
@@ -345,7 +361,7 @@ def fit_behavior(sim: ImplicitSimulator, train: list[Observed], config: FitConfi
     which first-order methods crawl along). The cloth of `sim` is left with the best parameters seen."""
     params = BehaviorParams(sim.cloth, {n: float(getattr(sim.cloth.material, n).mean()) for n in MATERIAL_NAMES},
                             sim.terms, config.term_params)
-    problem = TeacherForced(sim, train, config.max_samples, config.seed)
+    problem = TeacherForced(sim, train, config.max_samples, config.seed, horizon=config.horizon)
     log = FitLog()
     stages = [("global", [params.global_z, params.term_s], config.global_iterations, None),
               ("local", [params.vertex_z, params.edge_s], config.local_iterations,

@@ -3,8 +3,9 @@ it through the force library, refit, and show the held-out rollout error before 
 
 0. Denoising: the noise level of every sequence is estimated from its third time differences; above 0.5 mm all
    sequences are smoothed in time (gg_core/diagnosis/noise.py: noisy velocities make any damping look right).
-1. Baseline: the behaviour fit with global parameters only (material, contact margin; per-vertex fields could
-   silently absorb a missing effect), rest shape = the first training frame.
+1. Baseline: the behaviour fit with global parameters only (material, internal damping, contact margin;
+   per-vertex fields could silently absorb a missing effect), rest shape = the first training frame. Fits predict
+   `fit_horizon` frames ahead of observed states (pipeline.fit_config).
 2. Residual: the one-frame position error of the simulator's own step on the training sequences, pooled in the
    weak form, after re-adjusting the global parameters to it (gg_core/diagnosis/residuals.py).
 3. Localization: per-vertex map, per-frame curve, their best-correlated state features, the standout region.
@@ -60,7 +61,8 @@ class DiagnoseRequest:
     seed: int = 0
     baseline_iterations: int = 15      # L-BFGS iterations of the global baseline fit
     refit_iterations: int = 8          # of each confirming refit (warm-started)
-    max_samples: int | None = 24       # teacher-forced frames per fit evaluation
+    max_samples: int | None = 12       # observed states per fit evaluation ...
+    fit_horizon: int = 3               # ... each predicted this many frames ahead (pipeline.fit_config)
     probe_acceleration: float = 0.5    # m/s^2: size of the model changes whose responses form the regression
     min_explained: float = 0.05        # share of the residual a selected candidate must explain
     min_inclusion: float = 0.5         # bootstrap inclusion probability a candidate needs to be tried

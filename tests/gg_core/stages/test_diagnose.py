@@ -21,7 +21,7 @@ from gg_core.geometry.meshio import read_mesh  # noqa: E402
 from gg_core.physics.fitting import Observed  # noqa: E402
 from gg_core.stages.diagnose import DiagnoseRequest, denoise, run_diagnose  # noqa: E402
 
-FAST = {"substeps": 1, "baseline_iterations": 10, "refit_iterations": 6, "bootstrap": 30, "max_samples": 24,
+FAST = {"substeps": 1, "baseline_iterations": 10, "refit_iterations": 6, "bootstrap": 30,
         "progress": "none"}
 
 
