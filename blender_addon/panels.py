@@ -49,11 +49,14 @@ class GG_PT_stages(Panel):
         ready = bool(settings.capture_path and settings.project_path)
         for run, load, icon in (("gg.reconstruct_template", "gg.load_template", "MESH_ICOSPHERE"),
                                 ("gg.register_sequences", "gg.load_registration", "ANIM"),
+                                ("gg.fit_behavior", "gg.show_behavior", "PHYSICS"),
                                 ("gg.diagnose_physics", "gg.show_residuals", "FORCE_WIND")):
             row = layout.row(align=True)
             row.enabled = ready
             row.operator(run, icon=icon)
             row.operator(load, text="", icon="FILE_REFRESH")
+        if settings.behavior:
+            layout.label(text=settings.behavior, icon="INFO")
         if settings.diagnosis:
             layout.label(text=settings.diagnosis, icon="INFO")
 

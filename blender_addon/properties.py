@@ -11,6 +11,7 @@ class GG_SceneSettings(PropertyGroup):
                                  description="Capture folder (one sub-folder per sequence with cameras.json)")
     project_path: StringProperty(name="Project", subtype="DIR_PATH",
                                  description="Project folder where the stages write their results")
+    behavior: StringProperty(name="Behaviour", description="Held-out rollout error of the last loaded behaviour fit")
     diagnosis: StringProperty(name="Diagnosis", description="Verdict of the last loaded physics diagnosis")
 
 

@@ -34,6 +34,15 @@ def add_progress_option(parser: argparse.ArgumentParser) -> None:
                              "for the Blender job runner, or nothing")
 
 
+def add_source_option(parser: argparse.ArgumentParser) -> None:
+    from .stages.motion import SOURCES  # noqa: PLC0415 - light (no torch), keeps the choices in one place
+
+    parser.add_argument("--source", choices=SOURCES, default="auto",
+                        help="garment motion to fit: the registered meshes of stage 2 (P/stage2/<seq>/meshes), the "
+                             "synthetic capture's ground truth (gt), or auto: registered when stage 2 has finished "
+                             "every sequence, else gt")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gg", description="Gaussian Garments: simulation-ready garment assets "
                                      "from multi-view video.")

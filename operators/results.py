@@ -1,4 +1,5 @@
-"""Bring stage results into the scene: the stage-1 template, registered sequences, the residual heat map.
+"""Bring stage results into the scene: the stage-1 template, registered sequences, the fitted material, the
+residual heat map.
 
 Each loader reads the project folder the stages wrote (layout in gg_core.stages; no torch here) and replaces
 what an earlier load of the same result created, so re-running a stage and loading again never piles up
@@ -125,6 +126,48 @@ class GG_OT_load_registration(_Loader):
         return len(files)
 
 
+def _report(project: Path, stage: str, how: str) -> dict:
+    path = _required(project / "reports" / f"{stage}.json", how)
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InputError(f"{stage} report cannot be read ({exc.__class__.__name__})", path, how) from None
+
+
+class GG_OT_show_behavior(_Loader):
+    """Colour the rest garment by its fitted stretch stiffness and show the held-out rollout error in the panel"""
+
+    bl_idname = "gg.show_behavior"
+    bl_label = "Show Fitted Material"
+
+    def load(self, scene: Scene, project: Path) -> str:
+        report = _report(project, "behavior", "run Fit Behaviour first")
+        path = _required(project / "stage4" / "behavior.npz", "run Fit Behaviour again")
+        with np.load(path) as z:
+            verts, faces, mu = z["template"], z["faces"], z["mu"]
+        if mu.shape != (len(verts),):
+            raise InputError(f"fitted material has {mu.shape} values for {len(verts)} vertices", path,
+                             "run Fit Behaviour again")
+        colors, vmax = heat_colors(mu)
+        obj = mesh_object("behavior_material", to_blender_points(verts), faces)
+        obj["gg_result"] = "behavior_material"
+        obj["gg_stiffness_max_pa"] = vmax
+        vertex_colors(obj, colors, "stiffness")
+        obj.data.materials.append(_attribute_material("stiffness"))
+        _replace_object(obj, _results_collection(scene))
+        scene.gg.behavior = behavior_summary(report)
+        return scene.gg.behavior
+
+
+def behavior_summary(report: dict) -> str:
+    """One line for the panel: held-out rollout error (mm) with the default and the fitted material."""
+    before, after = report.get("heldout_l2_default"), report.get("heldout_l2_fitted")
+    if before is None or after is None:
+        return f"Behaviour fitted to the {report.get('source', '?')} motion (no held-out sequence)"
+    return (f"Behaviour ({report.get('source', '?')} motion): held-out rollout {before * 1e3:.1f} -> "
+            f"{after * 1e3:.1f} mm")
+
+
 class GG_OT_show_residuals(_Loader):
     """Colour the garment by the diagnosis' residual force map and show the verdict in the panel"""
 
@@ -132,12 +175,7 @@ class GG_OT_show_residuals(_Loader):
     bl_label = "Show Residual Map"
 
     def load(self, scene: Scene, project: Path) -> str:
-        report_path = _required(project / "reports" / "diagnose.json", "run Diagnose Physics first")
-        try:
-            report = json.loads(report_path.read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise InputError(f"diagnosis report cannot be read ({exc.__class__.__name__})", report_path,
-                             "run Diagnose Physics again") from None
+        report = _report(project, "diagnose", "run Diagnose Physics first")
         verts, faces = read_mesh(_required(project / "diagnose" / "template.ply", "run Diagnose Physics again"))
         residual = np.load(_required(project / "diagnose" / "residual_vertex.npy", "run Diagnose Physics again"))
         if residual.shape != (len(verts),):
@@ -166,7 +204,8 @@ def summary(report: dict) -> str:
 
 def _attribute_material(attribute: str) -> bpy.types.Material:
     """A material that renders the colour attribute, so the heat map shows in Material/Rendered view too."""
-    material = bpy.data.materials.get("gg_residual") or bpy.data.materials.new("gg_residual")
+    name = f"gg_{attribute}"
+    material = bpy.data.materials.get(name) or bpy.data.materials.new(name)
     nodes, links = material.node_tree.nodes, material.node_tree.links
     nodes.clear()
     color = nodes.new("ShaderNodeVertexColor")
@@ -178,4 +217,4 @@ def _attribute_material(attribute: str) -> bpy.types.Material:
     return material
 
 
-CLASSES = (GG_OT_load_template, GG_OT_load_registration, GG_OT_show_residuals)
+CLASSES = (GG_OT_load_template, GG_OT_load_registration, GG_OT_show_behavior, GG_OT_show_residuals)

@@ -53,6 +53,15 @@ class GG_OT_register_sequences(_StageJob):
     stage, then = "register", "load_registration"
 
 
+class GG_OT_fit_behavior(_StageJob):
+    """Stage 4: fit the simulator's material and rest lengths to the registered motion (the synthetic ground truth
+    until registration has finished) and measure it on held-out sequences"""
+
+    bl_idname = "gg.fit_behavior"
+    bl_label = "Fit Behaviour"
+    stage, then = "behavior", "show_behavior"
+
+
 class GG_OT_diagnose_physics(_StageJob):
     """Find where and when simulation and recording differ, name the missing physics, refit, and colour the
     garment by the residual"""
@@ -62,4 +71,4 @@ class GG_OT_diagnose_physics(_StageJob):
     stage, then = "diagnose", "show_residuals"
 
 
-CLASSES = (GG_OT_reconstruct_template, GG_OT_register_sequences, GG_OT_diagnose_physics)
+CLASSES = (GG_OT_reconstruct_template, GG_OT_register_sequences, GG_OT_fit_behavior, GG_OT_diagnose_physics)

@@ -5,15 +5,15 @@ import argparse
 import json
 from pathlib import Path
 
-from ..cli import add_progress_option
+from ..cli import add_progress_option, add_source_option
 
 HELP = "stage 4: fit material and rest lengths to the registered motion; evaluate on held-out sequences"
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("capture", type=Path, help="capture folder (synthetic captures: ground-truth meshes are used "
-                                                   "as the registered motion until registration exists)")
+    parser.add_argument("capture", type=Path, help="capture folder")
     parser.add_argument("--project", type=Path, required=True, help="project folder to write stage4/ and reports/")
+    add_source_option(parser)
     parser.add_argument("--train", nargs="+", default=[], metavar="SEQ",
                         help="training sequences (default: truth.json's suggestion, else all but the last)")
     parser.add_argument("--heldout", nargs="+", default=[], metavar="SEQ",
@@ -25,7 +25,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--global-iterations", type=int, default=20, help="L-BFGS iterations of the global fit")
     parser.add_argument("--local-iterations", type=int, default=20,
                         help="L-BFGS iterations of the per-vertex material / rest length fit (0 skips it)")
-    parser.add_argument("--max-samples", type=int, default=24, help="teacher-forced frames used per evaluation")
+    parser.add_argument("--max-samples", type=int, default=24, help="observed states used per fit evaluation")
+    parser.add_argument("--fit-horizon", type=int, default=1,
+                        help="frames the simulator predicts ahead of each observed state in the fit")
     parser.add_argument("--force", action="append", default=[], metavar="TERM[:KEY=VALUE,...]",
                         help="switch on a force-library term in the simulator, e.g. mass_damping:alpha=0.5")
     parser.add_argument("--fit-term", nargs="*", default=None, metavar="TERM.PARAM",
@@ -48,11 +50,12 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise InputError(str(exc), "--force", "e.g. --force mass_damping:alpha=0.5") from None
     req = BehaviorRequest(capture=args.capture, project=args.project, train=args.train, heldout=args.heldout,
-                          forces=forces,
+                          forces=forces, source=args.source,
                           noise_mm=args.noise_mm, attach_tol_mm=args.attach_tol_mm, fps=args.fps, substeps=args.substeps,
                           seed=args.seed,
                           fit=FitConfig(global_iterations=args.global_iterations,
                                         local_iterations=args.local_iterations, max_samples=args.max_samples,
+                                        horizon=args.fit_horizon,
                                         seed=args.seed, term_params=FitConfig.term_params if args.fit_term is None
                                         else tuple(args.fit_term)),
                           progress=args.progress)

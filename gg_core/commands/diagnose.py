@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..cli import add_progress_option
+from ..cli import add_progress_option, add_source_option
 
 HELP = "missing-physics diagnosis: residual map and curve, named effect, refit, held-out rollout error before/after"
 
@@ -14,9 +14,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("capture", type=Path, help="capture folder")
     parser.add_argument("--project", type=Path, required=True,
                         help="project folder: writes diagnose/ and reports/diagnose.json|html")
-    parser.add_argument("--source", choices=("gt", "registered"), default="gt",
-                        help="garment meshes to diagnose: registered (P/stage2/<seq>/meshes) or the synthetic "
-                             "capture's ground truth (default)")
+    add_source_option(parser)
     parser.add_argument("--train", nargs="+", default=[], metavar="SEQ",
                         help="training sequences (default: the behaviour stage's split)")
     parser.add_argument("--heldout", nargs="+", default=[], metavar="SEQ",

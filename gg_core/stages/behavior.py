@@ -1,8 +1,7 @@
 """Stage 4 (behaviour): fit the simulator's material and rest lengths to the garment's registered motion.
 
-Inputs: per sequence the registered garment meshes (template topology) and the body meshes. Until registration
-exists the synthetic capture's ground-truth meshes stand in for them (optionally with added noise), as issue 5
-asks. The rest shape is the first training frame; vertices that move rigidly with the body surface in every
+Inputs: per sequence the registered garment meshes (template topology) and the body meshes; on synthetic captures
+the ground-truth meshes instead (motion.py: `--source`), optionally with added noise. The rest shape is the first training frame; vertices that move rigidly with the body surface in every
 training frame (waistbands, top bands) are treated as attached and follow their observed positions.
 
 Outputs: <project>/stage4/behavior.npz (template, faces, attached mask, per-vertex material, rest lengths) and
@@ -19,9 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..capture.layout import Capture, Sequence
+from ..capture.layout import Capture
 from ..errors import InputError
-from ..geometry.meshio import read_mesh
 from ..jobs import Progress
 from ..physics.cloth import Cloth
 from ..physics.contact import BodyCollider
@@ -31,6 +29,7 @@ from ..physics.material import MATERIAL_NAMES
 from ..physics.simulator import ImplicitSimulator
 from ..storage import write_npz, write_report
 from ..synth.anchoring import bind
+from .motion import garment_files, inputs_key, load_sequence, resolve_source
 
 STAGE = "behavior"
 
@@ -42,6 +41,7 @@ class BehaviorRequest:
     train: list[str] = field(default_factory=list)     # empty: truth.json's suggestion, else all but the last
     heldout: list[str] = field(default_factory=list)
     forces: dict[str, dict] = field(default_factory=dict)  # force-library terms switched on, with parameters
+    source: str = "auto"       # garment meshes fitted to: registered, gt or auto (motion.py)
     noise_mm: float = 0.0
     attach_tol_mm: float = 3.0
     fps: float = 30.0
@@ -68,29 +68,6 @@ def split(capture: Capture, train: list[str], heldout: list[str]) -> tuple[list[
     return train, heldout
 
 
-def load_sequence(seq: Sequence, noise_mm: float, rng: np.random.Generator, fps: float
-                  ) -> tuple[Observed, np.ndarray, np.ndarray]:
-    """(observation, garment faces, body faces) of one sequence from its garment and body meshes."""
-    gt = seq.gt_garment_files
-    if not gt:
-        raise InputError("no registered garment meshes for the sequence", seq.root,
-                         "run registration first, or use a synthetic capture (gt/garment/<frame>.ply)")
-    frames = sorted(gt)
-    missing = [f for f in frames if f not in seq.body_files]
-    if missing:
-        raise InputError(f"no body mesh for frames {missing[:3]}", seq.root / "body",
-                         "name body meshes like the garment frames")
-    meshes = [read_mesh(gt[f]) for f in frames]
-    bodies = [read_mesh(seq.body_files[f]) for f in frames]
-    garment = np.stack([m[0] for m in meshes])
-    if len({m[0].shape for m in meshes}) != 1 or len({b[0].shape for b in bodies}) != 1:
-        raise InputError("garment or body meshes change vertex count within the sequence", seq.root,
-                         "register every frame to the template topology")
-    if noise_mm > 0:
-        garment = garment + rng.normal(0, noise_mm * 1e-3, garment.shape)
-    return Observed(seq.name, garment, np.stack([b[0] for b in bodies]), fps), meshes[0][1], bodies[0][1]
-
-
 def hand_mask(n_body_vertices: int) -> np.ndarray | None:
     """The default body's hand vertices when the capture's body meshes are that body (hands do not collide)."""
     from ..body.model import load_body  # noqa: PLC0415 - cheap cached asset, only when bodies match
@@ -110,30 +87,26 @@ def attached_vertices(sequences: list[Observed], body_faces: np.ndarray, tol: fl
     return worst < tol
 
 
-def inputs_key(req: BehaviorRequest, capture: Capture, names: list[str]) -> dict:
-    """What the stage's result depends on: its options and the meshes it reads (name, size, mtime)."""
-    files = {}
-    for n in names:
-        seq = capture.sequence(n)
-        for kind, group in (("garment", seq.gt_garment_files), ("body", seq.body_files)):
-            files[f"{n}/{kind}"] = [[p.name, p.stat().st_size, p.stat().st_mtime_ns] for p in group.values()]
-    options = {k: v for k, v in asdict(req).items() if k not in ("project", "progress")}
-    return json.loads(json.dumps({"options": options, "files": files}, default=str))
-
-
 def run_behavior(req: BehaviorRequest) -> Path:
     timings: dict[str, float] = {}
     start = time.perf_counter()
     capture = Capture(req.capture)
     train_names, heldout_names = split(capture, req.train, req.heldout)
-    key = inputs_key(req, capture, train_names + heldout_names)
+    source = resolve_source(req.source, capture, train_names + heldout_names, req.project)
+    key = inputs_key(req, capture, train_names + heldout_names, source, req.project)
     report_path = Path(req.project) / "reports" / f"{STAGE}.json"
     out = Path(req.project) / "stage4" / "behavior.npz"
     if report_path.is_file() and out.is_file() and json.loads(report_path.read_text()).get("inputs") == key:
         Progress(STAGE, 1, req.progress).done(str(report_path))   # unchanged inputs: keep the finished result
         return report_path
     rng = np.random.default_rng(req.seed)
-    loaded = {n: load_sequence(capture.sequence(n), req.noise_mm, rng, req.fps) for n in train_names + heldout_names}
+    loaded = {}
+    for n in train_names + heldout_names:
+        seq = capture.sequence(n)
+        obs, faces, body_faces = load_sequence(seq, garment_files(seq, source, req.project), req.fps)
+        if req.noise_mm > 0:
+            obs.garment = obs.garment + rng.normal(0, req.noise_mm * 1e-3, obs.garment.shape)
+        loaded[n] = (obs, faces, body_faces)
     train = [loaded[n][0] for n in train_names]
     heldout = [loaded[n][0] for n in heldout_names]
     faces, body_faces = loaded[train_names[0]][1], loaded[train_names[0]][2]
@@ -193,7 +166,7 @@ def run_behavior(req: BehaviorRequest) -> Path:
         "heldout_l2_reduction": None if default is None else 1.0 - fitted / default,
         "l2_per_sequence": per_sequence,
         "train_sequences": train_names, "heldout_sequences": heldout_names,
-        "source": "synthetic ground-truth meshes (registration not yet available)",
+        "source": source,
         "noise_mm": req.noise_mm, "vertices": cloth.n_vertices, "attached_vertices": int(attached.sum()),
         "fitted": {"global": params.global_values(), "terms": params.term_values(), "per_vertex": mat.summary(),
                    "rest_length_scale": {"mean": float(rest_scale.mean()), "min": float(rest_scale.min()),

@@ -15,8 +15,8 @@ it through the force library, refit, and show the held-out rollout error before 
    rollout error drops by at least `min_gain` (and `min_gain_mm`) and the training sequences' free rollouts
    improve too.
 
-Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply, `--source registered`) or, for synthetic captures,
-the ground-truth meshes (`--source gt`), optionally with spatially correlated noise. truth.json is read only for
+Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply) or, for synthetic captures, the ground-truth meshes,
+optionally with spatially correlated noise (motion.py: `--source`, auto by default). truth.json is read only for
 the train / held-out split the behaviour stage uses.
 
 Outputs: P/reports/diagnose.json, P/reports/diagnose.html, P/diagnose/residual_vertex.npy ([V], m/s^2),
@@ -26,21 +26,21 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..capture.layout import Capture, Sequence
+from ..capture.layout import Capture
 from ..diagnosis.noise import SMOOTH_ORDER, SMOOTH_WINDOW, correlated_noise, noise_level, smooth_in_time
 from ..errors import InputError
 from ..geometry.meshio import write_ply
 from ..jobs import Progress
 from ..storage import atomic_path, write_json, write_report
-from .behavior import attached_vertices, hand_mask, load_sequence, split
+from .behavior import attached_vertices, hand_mask, split
+from .motion import garment_files, inputs_key, load_sequence, resolve_source
 
 STAGE = "diagnose"
-SOURCES = ("gt", "registered")
 DENOISE = ("auto", "on", "off")
 DENOISE_ABOVE_MM = 0.5    # noise-free benchmark sequences estimate at 0.03-0.2 mm (contacts), noisy ones at sigma
 
@@ -49,7 +49,7 @@ DENOISE_ABOVE_MM = 0.5    # noise-free benchmark sequences estimate at 0.03-0.2 
 class DiagnoseRequest:
     capture: Path
     project: Path
-    source: str = "gt"
+    source: str = "auto"               # garment meshes: registered, gt or auto (motion.py)
     train: list[str] = field(default_factory=list)
     heldout: list[str] = field(default_factory=list)
     noise_mm: float = 0.0              # spatially correlated noise added to the garment meshes (std, mm)
@@ -74,23 +74,6 @@ class DiagnoseRequest:
     reference: list[str] = field(default_factory=list)   # candidates always trialled (benchmarks), never accepted
     reference_region: str = ""         # .npy of [V] weights for region candidates in reference trials
     progress: str = "bar"
-
-
-def mesh_files(seq: Sequence, source: str, project: Path) -> dict[str, Path]:
-    if source == "gt":
-        return seq.gt_garment_files
-    folder = Path(project) / "stage2" / seq.name / "meshes"
-    return {p.stem: p for p in sorted(folder.glob("*.ply"))} if folder.is_dir() else {}
-
-
-@dataclass
-class _MeshView:
-    """A sequence whose garment meshes come from `files` (registered or ground truth), for load_sequence."""
-
-    root: Path
-    name: str
-    gt_garment_files: dict[str, Path]
-    body_files: dict[str, Path]
 
 
 @dataclass
@@ -130,17 +113,12 @@ def denoise(req: DiagnoseRequest, loaded: dict) -> Denoising:
     return result
 
 
-def load(req: DiagnoseRequest, capture: Capture, names: list[str]) -> dict:
+def load(req: DiagnoseRequest, capture: Capture, names: list[str], source: str) -> dict:
     rng = np.random.default_rng(req.seed)
     out = {}
     for n in names:
         seq = capture.sequence(n)
-        files = mesh_files(seq, req.source, req.project)
-        if not files:
-            where = seq.root / "gt" / "garment" if req.source == "gt" else Path(req.project) / "stage2" / n / "meshes"
-            raise InputError(f"no {req.source} garment meshes for sequence '{n}'", where,
-                             "run registration first (gg register), or use --source gt on a synthetic capture")
-        obs, faces, body_faces = load_sequence(_MeshView(seq.root, n, files, seq.body_files), 0.0, rng, req.fps)
+        obs, faces, body_faces = load_sequence(seq, garment_files(seq, source, req.project), req.fps)
         if req.noise_mm > 0:
             obs.garment = obs.garment + correlated_noise(obs.garment[0], req.noise_mm * 1e-3,
                                                          req.noise_length_mm * 1e-3, len(obs.garment), rng)
@@ -148,19 +126,7 @@ def load(req: DiagnoseRequest, capture: Capture, names: list[str]) -> dict:
     return out
 
 
-def inputs_key(req: DiagnoseRequest, capture: Capture, names: list[str]) -> dict:
-    files = {}
-    for n in names:
-        seq = capture.sequence(n)
-        for kind, group in (("garment", mesh_files(seq, req.source, req.project)), ("body", seq.body_files)):
-            files[f"{n}/{kind}"] = [[p.name, p.stat().st_size, p.stat().st_mtime_ns] for p in group.values()]
-    options = {k: v for k, v in asdict(req).items() if k not in ("project", "progress")}
-    return json.loads(json.dumps({"options": options, "files": files}, default=str))
-
-
 def run_diagnose(req: DiagnoseRequest) -> Path:
-    if req.source not in SOURCES:
-        raise InputError(f"unknown source '{req.source}'", "--source", f"choose one of: {', '.join(SOURCES)}")
     if req.denoise not in DENOISE:
         raise InputError(f"unknown denoise mode '{req.denoise}'", "--denoise", f"choose one of: {', '.join(DENOISE)}")
     start = time.perf_counter()
@@ -171,7 +137,8 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
                          "pass --heldout, or give the capture at least two sequences")
     project = Path(req.project)
     report_path = project / "reports" / f"{STAGE}.json"
-    key = inputs_key(req, capture, train_names + heldout_names)
+    source = resolve_source(req.source, capture, train_names + heldout_names, project)
+    key = inputs_key(req, capture, train_names + heldout_names, source, project)
     if report_path.is_file() and json.loads(report_path.read_text()).get("inputs") == key:
         Progress(STAGE, 1, req.progress).done(str(report_path))   # unchanged inputs: keep the finished result
         return report_path
@@ -179,7 +146,7 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     from ..diagnosis.pipeline import diagnose  # noqa: PLC0415 - torch only when the stage runs
     from ..diagnosis.report import write_html  # noqa: PLC0415
 
-    loaded = load(req, capture, train_names + heldout_names)
+    loaded = load(req, capture, train_names + heldout_names, source)
     denoised = denoise(req, loaded)
     train = [loaded[n][0] for n in train_names]
     heldout = [loaded[n][0] for n in heldout_names]
@@ -198,7 +165,7 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     write_ply(out / "template.ply", train[0].garment[0], faces)
     payload = result.summary()
     payload.update({
-        "train_sequences": train_names, "heldout_sequences": heldout_names, "source": req.source,
+        "train_sequences": train_names, "heldout_sequences": heldout_names, "source": source,
         "noise_mm": req.noise_mm, "denoising": denoised.to_json(), "vertices": len(train[0].garment[0]),
         "attached_vertices": int(attached.sum()),
         "outputs": {"residual_vertex": str(out / "residual_vertex.npy"),

@@ -88,7 +88,10 @@ def test_pipeline_panel_offers_each_stage_and_its_loader(blender, extension_pack
     log = draw(blender, panels.GG_PT_stages)
     ops = [entry[1] for entry in log if entry[0] == "operator"]
     assert ops == ["gg.reconstruct_template", "gg.load_template", "gg.register_sequences", "gg.load_registration",
-                   "gg.diagnose_physics", "gg.show_residuals"]
+                   "gg.fit_behavior", "gg.show_behavior", "gg.diagnose_physics", "gg.show_residuals"]
     assert not any(entry[0] == "label" for entry in log)
+    blender.context.scene.gg.behavior = "Behaviour (registered motion): held-out rollout 31.2 -> 12.5 mm"
     blender.context.scene.gg.diagnosis = "Missing physics: air_drag (+42% held-out)"
-    assert draw(blender, panels.GG_PT_stages)[-1] == ("label", "Missing physics: air_drag (+42% held-out)")
+    assert draw(blender, panels.GG_PT_stages)[-2:] == [
+        ("label", "Behaviour (registered motion): held-out rollout 31.2 -> 12.5 mm"),
+        ("label", "Missing physics: air_drag (+42% held-out)")]

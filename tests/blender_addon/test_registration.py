@@ -22,7 +22,8 @@ def test_register_and_unregister(blender, extension_package):
     assert bpy.context.window_manager.gg_job.running is False
     assert bpy.types.GG_PT_stages.bl_parent_id == "GG_PT_garments"
     for op in ("import_capture", "run_job", "cancel_job", "use_capture_camera", "reconstruct_template",
-               "register_sequences", "diagnose_physics", "load_template", "load_registration", "show_residuals"):
+               "register_sequences", "fit_behavior", "diagnose_physics", "load_template", "load_registration",
+               "show_behavior", "show_residuals"):
         assert hasattr(bpy.ops.gg, op)
     assert not bpy.ops.gg.cancel_job.poll()  # nothing is running
     extension_package.unregister()

@@ -64,6 +64,39 @@ def test_registration_with_changing_topology_is_refused(blender, tmp_path):
         blender.ops.gg.load_registration()
 
 
+def _write_behavior(project: Path, report: dict, mu: np.ndarray) -> None:
+    (project / "reports").mkdir(parents=True)
+    (project / "stage4").mkdir()
+    (project / "reports" / "behavior.json").write_text(json.dumps(report))
+    np.savez(project / "stage4" / "behavior.npz", template=QUAD, faces=TRIS, mu=mu)
+
+
+def test_fitted_material_colours_the_garment_and_states_the_heldout_error(blender, tmp_path, z_up):
+    report = {"source": "registered", "heldout_l2_default": 0.0312, "heldout_l2_fitted": 0.0125}
+    _write_behavior(tmp_path, report, np.array([1000.0, 1000.0, 4000.0, 8000.0]))
+    blender.context.scene.gg.project_path = str(tmp_path)
+    for _ in range(2):  # loading again replaces, never duplicates
+        assert blender.ops.gg.show_behavior() == {"FINISHED"}
+    objs = [o for o in blender.data.objects if o.get("gg_result") == "behavior_material"]
+    assert len(objs) == 1
+    co = np.empty(4 * 3, np.float32)
+    objs[0].data.vertices.foreach_get("co", co)
+    np.testing.assert_allclose(co.reshape(-1, 3), z_up(QUAD), atol=1e-6)
+    colors = np.empty(4 * 4, np.float32)
+    objs[0].data.color_attributes["stiffness"].data.foreach_get("color", colors)
+    colors = colors.reshape(4, 4)
+    assert np.allclose(colors[0], colors[1]) and not np.allclose(colors[0], colors[3])
+    assert blender.context.scene.gg.behavior == \
+        "Behaviour (registered motion): held-out rollout 31.2 -> 12.5 mm"
+
+
+def test_fitted_material_of_wrong_length_is_refused(blender, tmp_path):
+    _write_behavior(tmp_path, {"source": "gt"}, np.zeros(3))
+    blender.context.scene.gg.project_path = str(tmp_path)
+    with pytest.raises(RuntimeError, match=r"gg: error: fitted material has \(3,\) values for 4 vertices"):
+        blender.ops.gg.show_behavior()
+
+
 def _write_diagnosis(project: Path, report: dict, residual: np.ndarray) -> None:
     (project / "reports").mkdir(parents=True)
     (project / "diagnose").mkdir()
@@ -100,7 +133,8 @@ def test_nothing_missing_is_said_plainly(blender, tmp_path):
     assert blender.context.scene.gg.diagnosis.startswith("Nothing missing")
 
 
-@pytest.mark.parametrize("operator", ["reconstruct_template", "register_sequences", "diagnose_physics"])
+@pytest.mark.parametrize("operator", ["reconstruct_template", "register_sequences", "fit_behavior",
+                                      "diagnose_physics"])
 def test_stage_buttons_need_both_folders(blender, operator):
     with pytest.raises(RuntimeError, match=r"gg: error: no capture folder set, Garments panel > Capture"):
         getattr(blender.ops.gg, operator)()

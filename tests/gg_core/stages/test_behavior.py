@@ -45,7 +45,7 @@ def test_behavior_fit_improves_heldout_rollouts(tmp_path):
 def test_behavior_refuses_a_capture_without_registered_meshes(tmp_path):
     (tmp_path / "capture" / "s0").mkdir(parents=True)
     (tmp_path / "capture" / "s0" / "cameras.json").write_text("{}")
-    with pytest.raises(InputError, match="no registered garment meshes"):
+    with pytest.raises(InputError, match="registration has not finished sequence 's0'"):
         run_behavior(BehaviorRequest(capture=tmp_path / "capture", project=tmp_path / "p", progress="none"))
 
 
