@@ -1,6 +1,7 @@
 """Crash-safe writes: everything goes to a temporary name in the target folder, then is renamed.
 
-A cancelled or crashed stage therefore never leaves a half-written file under a final name.
+A cancelled or crashed stage therefore never leaves a half-written file under a final name. Also what stages
+record of their inputs to resume (file_stamps).
 """
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import tempfile
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterable, Iterator
 
 import numpy as np
 
@@ -31,6 +32,12 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def file_stamps(paths: Iterable[Path], root: Path | None = None) -> list[list]:
+    """[name (relative to `root`, else the file name), size, mtime_ns] per file: what a stage's resume key records
+    of its input files, so a rewritten input reruns the stage and an untouched one does not."""
+    return [[str(p.relative_to(root)) if root else p.name, p.stat().st_size, p.stat().st_mtime_ns] for p in paths]
 
 
 def write_json(path: str | os.PathLike, obj: Any) -> Path:

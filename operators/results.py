@@ -126,6 +126,19 @@ class GG_OT_load_registration(_Loader):
         return len(files)
 
 
+def _heat_map(scene: Scene, result: str, verts: np.ndarray, faces: np.ndarray, values: np.ndarray,
+              attribute: str) -> Object:
+    """A mesh of the results collection coloured by per-vertex `values` (colour attribute `attribute`, rendered
+    by an emission material); the value at the top of the ramp is kept as gg_<attribute>_max for a legend."""
+    colors, vmax = heat_colors(values)
+    obj = mesh_object(result, to_blender_points(verts), faces)
+    obj["gg_result"] = result
+    obj[f"gg_{attribute}_max"] = vmax
+    vertex_colors(obj, colors, attribute)
+    obj.data.materials.append(_attribute_material(attribute))
+    return _replace_object(obj, _results_collection(scene))
+
+
 def _report(project: Path, stage: str, how: str) -> dict:
     path = _required(project / "reports" / f"{stage}.json", how)
     try:
@@ -148,13 +161,7 @@ class GG_OT_show_behavior(_Loader):
         if mu.shape != (len(verts),):
             raise InputError(f"fitted material has {mu.shape} values for {len(verts)} vertices", path,
                              "run Fit Behaviour again")
-        colors, vmax = heat_colors(mu)
-        obj = mesh_object("behavior_material", to_blender_points(verts), faces)
-        obj["gg_result"] = "behavior_material"
-        obj["gg_stiffness_max_pa"] = vmax
-        vertex_colors(obj, colors, "stiffness")
-        obj.data.materials.append(_attribute_material("stiffness"))
-        _replace_object(obj, _results_collection(scene))
+        _heat_map(scene, "behavior_material", verts, faces, mu, "stiffness")
         scene.gg.behavior = behavior_summary(report)
         return scene.gg.behavior
 
@@ -181,13 +188,7 @@ class GG_OT_show_residuals(_Loader):
         if residual.shape != (len(verts),):
             raise InputError(f"residual map has {residual.shape} values for {len(verts)} vertices",
                              project / "diagnose", "run Diagnose Physics again")
-        colors, vmax = heat_colors(residual)
-        obj = mesh_object("diagnosis_residual", to_blender_points(verts), faces)
-        obj["gg_result"] = "diagnosis_residual"
-        obj["gg_residual_max"] = vmax
-        vertex_colors(obj, colors, "residual")
-        obj.data.materials.append(_attribute_material("residual"))
-        _replace_object(obj, _results_collection(scene))
+        _heat_map(scene, "diagnosis_residual", verts, faces, residual, "residual")
         scene.gg.diagnosis = summary(report)
         return scene.gg.diagnosis
 

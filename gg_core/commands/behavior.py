@@ -25,9 +25,11 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--global-iterations", type=int, default=20, help="L-BFGS iterations of the global fit")
     parser.add_argument("--local-iterations", type=int, default=20,
                         help="L-BFGS iterations of the per-vertex material / rest length fit (0 skips it)")
-    parser.add_argument("--max-samples", type=int, default=24, help="observed states used per fit evaluation")
-    parser.add_argument("--fit-horizon", type=int, default=1,
-                        help="frames the simulator predicts ahead of each observed state in the fit")
+    parser.add_argument("--max-samples", type=int, default=None,
+                        help="observed states used per fit evaluation (default 12, FitConfig)")
+    parser.add_argument("--fit-horizon", type=int, default=None,
+                        help="frames the simulator predicts ahead of each observed state in the fit (default 3: "
+                             "one-frame fits learn the noise of registered meshes)")
     parser.add_argument("--force", action="append", default=[], metavar="TERM[:KEY=VALUE,...]",
                         help="switch on a force-library term in the simulator, e.g. mass_damping:alpha=0.5")
     parser.add_argument("--fit-term", nargs="*", default=None, metavar="TERM.PARAM",
@@ -49,13 +51,13 @@ def run(args: argparse.Namespace) -> int:
         forces = dict(parse_term_spec(s) for s in args.force)
     except ValueError as exc:
         raise InputError(str(exc), "--force", "e.g. --force mass_damping:alpha=0.5") from None
+    chosen = {k: v for k, v in (("max_samples", args.max_samples), ("horizon", args.fit_horizon)) if v is not None}
     req = BehaviorRequest(capture=args.capture, project=args.project, train=args.train, heldout=args.heldout,
                           forces=forces, source=args.source,
                           noise_mm=args.noise_mm, attach_tol_mm=args.attach_tol_mm, fps=args.fps, substeps=args.substeps,
                           seed=args.seed,
                           fit=FitConfig(global_iterations=args.global_iterations,
-                                        local_iterations=args.local_iterations, max_samples=args.max_samples,
-                                        horizon=args.fit_horizon,
+                                        local_iterations=args.local_iterations, **chosen,
                                         seed=args.seed, term_params=FitConfig.term_params if args.fit_term is None
                                         else tuple(args.fit_term)),
                           progress=args.progress)

@@ -18,6 +18,7 @@ import numpy as np
 from ..capture.layout import Capture, Sequence
 from ..errors import InputError
 from ..geometry.meshio import read_mesh
+from ..storage import file_stamps
 
 if TYPE_CHECKING:   # torch stays out of `gg --help`, which lists SOURCES
     from ..physics.fitting import Observed
@@ -88,6 +89,6 @@ def inputs_key(request: object, capture: Capture, names: list[str], source: str,
     for n in names:
         seq = capture.sequence(n)
         for kind, group in (("garment", garment_files(seq, source, project)), ("body", seq.body_files)):
-            files[f"{n}/{kind}"] = [[p.name, p.stat().st_size, p.stat().st_mtime_ns] for p in group.values()]
+            files[f"{n}/{kind}"] = file_stamps(group.values())
     options = {k: v for k, v in asdict(request).items() if k not in ("project", "progress")}
     return json.loads(json.dumps({"options": options, "source": source, "files": files}, default=str))

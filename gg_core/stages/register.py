@@ -32,7 +32,7 @@ from ..capture.layout import FOREGROUND_MASK, GARMENT_MASK, RGB, Capture, Sequen
 from ..errors import InputError
 from ..geometry.meshio import read_mesh, read_obj, write_ply
 from ..jobs import Progress
-from ..storage import atomic_path, write_json, write_report
+from ..storage import atomic_path, file_stamps, write_json, write_report
 
 STAGE = "register"
 ICP_CLOUD_VERTICES = 2000    # points of the first frame's reconstruction that ICP aligns to
@@ -84,7 +84,7 @@ def load_stage1(project: Path) -> Stage1:
         raise InputError(f"template topology mismatch: gaussians.npz binds to {_face_count(texture)} faces, "
                          f"template.obj has {len(faces)}", project / "stage1",
                          "run gg template again so both files come from one run")
-    files = [[p.name, p.stat().st_size, p.stat().st_mtime_ns] for p in (obj, gauss)]
+    files = file_stamps((obj, gauss))
     return Stage1(verts, faces, texture, files)
 
 
@@ -105,7 +105,7 @@ def frame_files(seq: Sequence, frame: str) -> list:
     paths = [seq.root / "cameras.json", seq.body_path(frame)]
     for cid in seq.camera_ids:
         paths += [seq.image_path(cid, frame, kind) for kind in (RGB, GARMENT_MASK, FOREGROUND_MASK)]
-    return [[str(p.relative_to(seq.root)), p.stat().st_size, p.stat().st_mtime_ns] for p in paths]
+    return file_stamps(paths, seq.root)
 
 
 def _digest(obj: object) -> str:

@@ -27,7 +27,7 @@ from ..capture.layout import GARMENT_MASK, Capture, Sequence
 from ..errors import InputError
 from ..geometry.meshio import read_mesh, read_obj, write_obj
 from ..jobs import Progress
-from ..storage import write_json, write_npz, write_report
+from ..storage import file_stamps, write_json, write_npz, write_report
 
 STAGE = "template"
 MIN_CAMERAS = 3              # cameras that must see the garment
@@ -84,7 +84,7 @@ def inputs_key(req: TemplateRequest, seq: Sequence, frame: str, camera_ids: list
     paths = [seq.root / "cameras.json", seq.body_path(frame)]
     for cid in camera_ids:
         paths += [seq.image_path(cid, frame, kind) for kind in ("rgb_images", GARMENT_MASK, "foreground_masks")]
-    files = [[str(p.relative_to(seq.root)), p.stat().st_size, p.stat().st_mtime_ns] for p in paths]
+    files = file_stamps(paths, seq.root)
     options = {k: v for k, v in asdict(req).items() if k not in ("project", "progress", "capture")}
     return json.loads(json.dumps({"options": options, "sequence": seq.name, "frame": frame, "files": files},
                                  default=str))

@@ -115,11 +115,14 @@ def generate(req: SynthRequest) -> Path:
             cameras={cid: c.to_json() for cid, c in cameras.items()}, lights=studio, look=look.to_json(),
             uv_scale=garment.uv_scale,
             render={"samples": preset.samples, "denoise": preset.denoise, "seed": req.seed})
-        _prepare(job, work, seq_dir)
+        resumed = _prepare(job, work, seq_dir)
         if not (work / "arrays.npz").is_file():
             write_npz(work / "arrays.npz", **arrays)
-        save_cameras(seq_dir / "cameras.json", cameras)
-        write_meshes(seq_dir / "body", frame_names, frames[preset.settle_frames:], body.faces)
+        # a resumed sequence keeps its files untouched: later stages key their results on file times
+        if not (resumed and (seq_dir / "cameras.json").is_file()):
+            save_cameras(seq_dir / "cameras.json", cameras)
+        if not (resumed and all((seq_dir / "body" / f"{n}.ply").is_file() for n in frame_names)):
+            write_meshes(seq_dir / "body", frame_names, frames[preset.settle_frames:], body.faces)
         job.save(work / "job.json")
         seq_timings[name] = _run_worker(work / "job.json", progress, render=req.render)
         seq_timings[name]["total_s"] = time.perf_counter() - t0
@@ -184,17 +187,18 @@ def _digest(arrays: dict[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def _prepare(job: SequenceJob, work: Path, seq_dir: Path) -> None:
-    """Keep a sequence's finished work only if it was made by exactly this job; else clear it."""
+def _prepare(job: SequenceJob, work: Path, seq_dir: Path) -> bool:
+    """Keep a sequence's finished work only if it was made by exactly this job (True), else clear it (False)."""
     saved = work / "job.json"
     if saved.is_file() and _resume_key(json.loads(saved.read_text())) == _resume_key(job.to_json()):
-        return
+        return True
     if work.exists():
         shutil.rmtree(work)
     for sub in [seq_dir / GT_GARMENT, seq_dir / "body"] + [seq_dir / cid / kind for cid in job.cameras
                                                            for kind in IMAGE_KINDS]:
         if sub.exists():
             shutil.rmtree(sub)
+    return False
 
 
 def _resume_key(job: dict) -> str:

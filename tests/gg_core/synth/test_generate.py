@@ -26,7 +26,12 @@ def test_same_seed_same_truth_and_resume_skips_finished_work(tiny_capture, tmp_p
     shutil.copytree(tiny_capture, copy)
     removed = copy / "00_walk" / "cam03" / "rgb_images" / "000005.png"
     removed.unlink()
+    kept = [copy / "00_walk" / "cameras.json", *(copy / "00_walk" / "body").glob("*.ply"),
+            *(copy / "00_walk" / "gt" / "garment").glob("*.ply")]
+    stamps = [p.stat().st_mtime_ns for p in kept]
     report = json.loads(generate_tiny(copy, check=False).read_text())
+    # untouched, so the stages that key their results on file times (template, register, behaviour) resume too
+    assert [p.stat().st_mtime_ns for p in kept] == stamps
     walk = report["timings"]["sequences"]["00_walk"]
     assert walk["resumed_simulation"] and walk["rendered_views"] == 1
     assert report["timings"]["sequences"]["01_arm_swing"]["rendered_views"] == 0
