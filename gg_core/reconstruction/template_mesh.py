@@ -81,9 +81,11 @@ def auto_vertex_count(area: float, footprint: float) -> int:
 
 def reconstruct_template(cameras: Sequence[Camera], foreground: Sequence[np.ndarray], garment: Sequence[np.ndarray],
                          images: Sequence[np.ndarray] | None = None, options: TemplateGeometryOptions | None = None,
-                         step: Callable[[str], None] | None = None) -> TemplateGeometry:
+                         step: Callable[[str], None] | None = None,
+                         occluders: Sequence[tuple[np.ndarray, np.ndarray]] = ()) -> TemplateGeometry:
     """Garment surface (open, manifold pieces) of one frame from per-camera foreground and garment masks,
-    refined by photo-consistency when the RGB `images` ([H, W, 3] floats) are given."""
+    refined by photo-consistency when the RGB `images` ([H, W, 3] floats) are given. `occluders` (the frame's
+    body) hide the garment from cameras in the photo-consistency step besides the hull itself."""
     opt = options or TemplateGeometryOptions()
     timings: dict[str, float] = {}
     clock = time.perf_counter()
@@ -135,7 +137,8 @@ def reconstruct_template(cameras: Sequence[Camera], foreground: Sequence[np.ndar
         raise ValueError("the garment vote left no surface")
     photo_log = None
     if images is not None and opt.photo is not None:
-        gv, photo_log = refine_along_normals(gv, gf, cameras, images, RayCaster([(rv, rf)]), footprint, opt.photo)
+        gv, photo_log = refine_along_normals(gv, gf, cameras, images, RayCaster([(rv, rf), *occluders]),
+                                                 footprint, opt.photo)
         lap("photo-consistency")
     gv, gf = tidy_border(gv, gf, edge)
     gv, gf = isotropic_remesh(gv, gf, edge, FINAL_REMESH_ITERATIONS)

@@ -129,13 +129,14 @@ def run_template(req: TemplateRequest) -> Path:
     from ..reconstruction.photo_consistency import PhotoOptions
     from ..reconstruction.template_mesh import GEOMETRY_STEPS, TemplateGeometryOptions, reconstruct_template
     from ..registration.appearance import fit_appearance
-    from ..registration.views import load_views
+    from ..registration.views import load_body, load_views
 
     geometry_steps = GEOMETRY_STEPS if req.photo else GEOMETRY_STEPS - 1
     progress = Progress(STAGE, 2 + geometry_steps + req.appearance_iterations, req.progress)
     timings: dict[str, float] = {}
     t = time.perf_counter()
-    views = load_views(seq, frame, camera_ids)
+    body = load_body(seq, frame)
+    views = load_views(seq, frame, camera_ids, body=body)
     timings["load_s"] = time.perf_counter() - t
     progress.step("loaded views")
 
@@ -154,7 +155,7 @@ def run_template(req: TemplateRequest) -> Path:
             geometry = reconstruct_template(
                 [v.camera for v in views], [v.background.numpy() < 0.5 for v in views],
                 [v.garment.numpy() > 0.5 for v in views], [v.rgb.numpy() for v in views] if req.photo else None,
-                options, step=lambda name: progress.step(name))
+                options, step=lambda name: progress.step(name), occluders=[body])
         except ValueError as exc:
             raise InputError(f"no template could be reconstructed: {exc}", f"{seq.root} frame {frame}",
                              "check that the foreground and garment masks match the cameras") from None

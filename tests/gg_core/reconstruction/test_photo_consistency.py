@@ -50,3 +50,20 @@ def test_refinement_moves_an_offset_plane_back_onto_the_textured_plane():
     assert np.abs(start[:, 2]).mean() == 0.02
     assert np.abs(moved[:, 2]).mean() < 0.003
     assert log["rounds"][0]["confident_vertices"] > 0.8 * len(verts)
+
+
+def test_an_occluder_hides_the_vertices_behind_it_from_that_camera_only():
+    from gg_core.reconstruction.photo_consistency import visible_cameras
+
+    cams = _cameras()
+    verts, faces = _plane(5, 0.1, 0.0)
+    normals = np.tile([0.0, 0.0, 1.0], (len(verts), 1))
+    plane_only = RayCaster([(verts, faces)])
+    seen = visible_cameras(verts, normals, cams, plane_only, 0.5, 0.005)
+    assert seen.all()
+    # a card halfway between camera 1 (eye at x = 0.4) and the plane: an arm in front of the garment
+    card_v, card_f = _plane(3, 0.3, 0.0)
+    card_v = card_v + 0.5 * cams[1].center
+    seen = visible_cameras(verts, normals, cams, RayCaster([(verts, faces), (card_v, card_f)]), 0.5, 0.005)
+    assert not seen[1].any()
+    assert seen[[0, 2, 3, 4]].all()
