@@ -25,7 +25,10 @@ grazing cameras (cosine 0.3: 0.645) do not help; nor does a robust (Charbonnier,
 neighbouring offsets differ by more than 2 / 5 / 10 mm (0.634 / 0.619 / 0.620). The sweep itself is the limit: the
 first round's peaks against the true surface along the hull normal, confident vertices: median error 4 mm (half
 a pixel), 60 % within 5 mm, 9 % more than 1 cm too deep and 9 % more than 1 cm too shallow; seen by only 2 cameras,
-30 % within 5 mm (ray cast to the demo capture's true surface).
+30 % within 5 mm (ray cast to the demo capture's true surface). Swept on the true surface itself, along its true
+normals, with visibility decided on it and the body: the peak is still more than 1 cm off at 18 % of the vertices
+(median 3.6 mm; no camera pair stands out), so at 8.8 mm pixels the matching itself, not the geometry it starts
+from, bounds what this refinement can reach.
 """
 from __future__ import annotations
 
