@@ -79,3 +79,25 @@ def test_body_projection_moves_only_vertices_inside_the_body(sheet_scene):
     far = verts[:, 2] > np.quantile(verts[:, 2], 0.8)
     moved = np.linalg.norm(results[True].verts - results[False].verts, axis=1)
     assert far.sum() >= 5 and np.median(moved[far]) < 0.2 * np.median(moved[inside])
+
+
+def test_virtual_edges_act_on_a_sequence_first_frame_only_unless_asked(sheet_scene):
+    """Two facing sheets (a skirt's front and back): their virtual edges hold the template's facing distances,
+    which later poses legitimately shorten, so warm-started frames (with a previous frame) leave them out."""
+    from gg_core.gaussians import build_texture
+
+    lo, hi = sheet_scene.verts.min(0), sheet_scene.verts.max(0)
+    front_v, front_f = plane_grid(lo, hi, 0.03, 6)
+    back_v, back_f = plane_grid(lo, hi, -0.03, 6)
+    verts = np.concatenate((front_v, back_v))
+    faces = np.concatenate((front_f, back_f[:, ::-1] + len(front_v)))
+    texture = build_texture(verts, faces, 32)
+    squeezed = verts * [1.0, 1.0, 0.5]                  # front and back closer than in the template
+    terms = {}
+    for name, previous, tracking in (("first", None, False), ("tracked", verts, False), ("asked", verts, True)):
+        config = TrackerConfig(views_per_iteration=1, coarse_scale=1.0, w_body=0.0, ve_tracking=tracking)
+        tracker = Tracker(texture, verts, faces, BodyCollider(FAR_BODY[1], 3), config)
+        assert len(tracker.virtual_edges) >= len(front_v)   # both ways, less rays grazing the sheets' edges
+        log = tracker.fit_frame(squeezed, sheet_scene.views, FAR_BODY[0], previous=previous, iterations=4).log
+        terms[name] = log["weighted_terms_mean"].get("ve", 0.0)
+    assert terms["first"] > 0 and terms["asked"] > 0 and terms["tracked"] == 0.0
