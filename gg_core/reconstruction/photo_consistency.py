@@ -14,9 +14,9 @@ Measured with the body and not kept: also hiding vertices behind the refined gar
 the argmax and quadratic fit (peaks > 1 cm off 20 -> 18 %), prominence instead of peak height as confidence
 (CD 1.06 cm), denoising the 8-sample renders first (Gaussian 0.7 px: 0.648 cm, non-local means: 0.736 cm).
 
-Where the template still erred before the body hid the garment (demo capture, 00_walk frame 0, 8.8 mm pixels): the hull alone has CD 1.23 cm,
-area 0.58 m^2 against the true 0.64, every point more than 1 cm off lies in a valley the hull bridges; after this
-refinement CD 0.62 cm, but area 0.53 m^2, and of the points still more than 1 cm off 43 % are in valleys and 47 %
+Where the template still erred before the body hid the garment (demo capture, 00_walk frame 0, 8.8 mm
+pixels): the hull alone has CD 1.23 cm, area 0.58 m^2 against the true 0.64, every point more than 1 cm off lies
+in a valley the hull bridges; after this refinement CD 0.62 cm, but area 0.53 m^2, and of the points still more than 1 cm off 43 % are in valleys and 47 %
 where the surface was pulled inside the cloth (the smooth offset field drags ridges in with their valleys). Measured
 and not kept: holding vertices on silhouette rims (projecting within 1 px of an outline, seen within 17 degrees of
 edge-on) at the hull, CD 1.01 / 1.21 cm at weight 1 / 10: it also holds the valleys' neighbours. More rounds (5:

@@ -137,8 +137,8 @@ def reconstruct_template(cameras: Sequence[Camera], foreground: Sequence[np.ndar
         raise ValueError("the garment vote left no surface")
     photo_log = None
     if images is not None and opt.photo is not None:
-        gv, photo_log = refine_along_normals(gv, gf, cameras, images, RayCaster([(rv, rf), *occluders]),
-                                                 footprint, opt.photo)
+        occluder = RayCaster([(rv, rf), *occluders])
+        gv, photo_log = refine_along_normals(gv, gf, cameras, images, occluder, footprint, opt.photo)
         lap("photo-consistency")
     gv, gf = tidy_border(gv, gf, edge)
     gv, gf = isotropic_remesh(gv, gf, edge, FINAL_REMESH_ITERATIONS)

@@ -1,7 +1,8 @@
 import numpy as np
 
 from gg_core.geometry.raycast import RayCaster
-from gg_core.reconstruction.photo_consistency import PhotoOptions, refine_along_normals, sweep_scores
+from gg_core.reconstruction.photo_consistency import (PhotoOptions, refine_along_normals, sweep_scores,
+                                                      visible_cameras)
 from gg_core.reconstruction.mesh_graph import vertex_normals
 
 from .scenes import plane_image
@@ -53,8 +54,6 @@ def test_refinement_moves_an_offset_plane_back_onto_the_textured_plane():
 
 
 def test_an_occluder_hides_the_vertices_behind_it_from_that_camera_only():
-    from gg_core.reconstruction.photo_consistency import visible_cameras
-
     cams = _cameras()
     verts, faces = _plane(5, 0.1, 0.0)
     normals = np.tile([0.0, 0.0, 1.0], (len(verts), 1))

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gg_core.gaussians import build_texture
 from gg_core.physics.contact import BodyCollider
 from gg_core.registration.tracker import ABLATIONS, Tracker, TrackerConfig, ablation_config
 
@@ -84,8 +85,6 @@ def test_body_projection_moves_only_vertices_inside_the_body(sheet_scene):
 def test_virtual_edges_act_on_a_sequence_first_frame_only_unless_asked(sheet_scene):
     """Two facing sheets (a skirt's front and back): their virtual edges hold the template's facing distances,
     which later poses legitimately shorten, so warm-started frames (with a previous frame) leave them out."""
-    from gg_core.gaussians import build_texture
-
     lo, hi = sheet_scene.verts.min(0), sheet_scene.verts.max(0)
     front_v, front_f = plane_grid(lo, hi, 0.03, 6)
     back_v, back_f = plane_grid(lo, hi, -0.03, 6)
