@@ -32,6 +32,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="coarsen the stage 1 Gaussian texture by this power of two for registration (default: "
                              "automatic, about one Gaussian per garment pixel; 1 keeps it: slower, on the demo "
                              "capture 0.08 cm lower CD)")
+    parser.add_argument("--texture-refit", type=int, default=300, metavar="STEPS",
+                        help="appearance steps refitting the coarsened texture on the template frame before "
+                             "tracking (default 300, about 12 s on the demo capture; 0: off)")
     parser.add_argument("--renders", type=int, default=3, help="frames per sequence rendered for inspection")
     parser.add_argument("--seed", type=int, default=0, help="seed of the camera sampling")
     add_progress_option(parser)
@@ -44,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
     report = run_register(RegisterRequest(capture=args.capture, project=args.project, sequences=args.sequences,
                                           ablation=args.ablation, iterations=args.iterations, frames=args.frames,
                                           align=args.align, icp_scale=args.icp_scale,
-                                          texture_factor=args.texture_factor, renders=args.renders, seed=args.seed,
+                                          texture_factor=args.texture_factor,
+                                          texture_refit=args.texture_refit, renders=args.renders, seed=args.seed,
                                           progress=args.progress))
     if args.progress != "jsonl":
         data = json.loads(report.read_text())
