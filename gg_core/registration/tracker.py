@@ -35,6 +35,16 @@ what drifts (shadows and occlusion by the moving body are the remaining suspects
 under-convergence: 200 iterations per frame instead of 100 give 0.739 cm on the same frames (frame 11: 0.95 vs
 1.06 cm), and on all 3 x 30 frames of the demo capture CD 0.80 vs 0.89 cm, p2m 0.73 vs 0.82 cm, F@1cm 72.9 vs
 69.2 %, at 17.1 s per frame (the issue's limit is 20 s): the default since then.
+How well the Gaussian texture is converged matters more than the optimizer (2026-11-25, demo walk frame 0 fitted
+from the 0.525 cm template with L_rgb alone): with the block-averaged registration texture the fit drifts to
+0.604 cm; with that texture refitted on the template frame for 300 / 1000 / 2500 steps to 0.592 / 0.550 / 0.527
+cm (the images then hold the mesh where it is; see stages/register.registration_texture). Measured and not kept,
+walk frames 0-11 from the 0.52 cm template (per-entry Adam: CD 0.617 cm): one second moment for all vertices
+(UniformAdam, max) lr 5e-3 / 2e-2: 0.664 / 0.655 cm (frame 0 better, 0.58, then it falls behind the motion:
+0.76 cm by frame 11); one second moment as the mean square: 0.784 cm (frame 0 0.53, frame 11 1.06); per-entry
+Adam with the mean square added to the denominator: 0.619 / 0.616 cm (lr 2e-3 / 4e-3); a learning rate decaying to
+0.02 instead of 0.1: 0.617 cm; L1 on high-passed images (sigma 2 px, against pose-dependent shading) with the
+2500-step texture: 0.557 cm, the same as without.
 """
 from __future__ import annotations
 

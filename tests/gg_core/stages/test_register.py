@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+import torch
 
 from gg_core.capture.layout import Capture
 from gg_core.commands.bench_register import _copy_stage1
@@ -97,3 +98,5 @@ def test_a_coarsened_texture_is_refitted_on_the_template_frame(tiny_capture, sta
     assert log_off["steps"] == 0 and log["steps"] == 30 and log["frame"] == "00_walk/000000"
     assert len(refitted) == len(coarse) < len(loaded.texture)
     assert log["rgb_loss_after"] < 0.9 * log["rgb_loss_before"]     # measured: 0.0090 -> 0.0073
+    again, log_again = registration_texture(capture, project, loaded, factor=2, refit=30)
+    assert log_again["reused"] and torch.equal(again.params, refitted.params)
