@@ -21,8 +21,8 @@ from gg_core.stages.template import TemplateRequest, run_template
 pytestmark = pytest.mark.slow
 
 FRAMES, ITERATIONS = 3, 30
-# measured (seed 0, 00_walk, 3 frames): CD 1.48 cm, p2m 1.41 cm, F@1cm 46 % - the template itself is 1.35 cm off
-# at this resolution (2 cm per pixel), and registration cannot do much better than its template here
+# measured before the texture refit (seed 0, 00_walk, 3 frames): CD 1.48 cm, p2m 1.41 cm, F@1cm 46 % - the template
+# is 1.35 cm off at this resolution (2 cm per pixel), and registration cannot do much better than its template here
 CD_BOUND_CM = 2.0
 
 
