@@ -144,10 +144,12 @@ def texture_factor(texture, views) -> int:
     return factor
 
 
-def registration_texture(capture: Capture, project: Path, stage1: Stage1, factor: int, refit: int) -> tuple:
+def registration_texture(capture: Capture, project: Path, stage1: Stage1, factor: int, refit: int,
+                         progress: Progress | None = None) -> tuple:
     """(The Gaussian texture registration renders, a log): stage 1's coarsened by `factor` and, when coarsened,
     refitted for `refit` appearance steps on the template's own frame with the template mesh. The refitted
     texture is kept in <project>/stage2/texture.npz with the key of what it was made from, so a re-run reuses it.
+    `progress` advances by `refit` steps when the factor is above 1, whether the refit runs, is reused or skipped.
 
     Averaging blocks of texels leaves the coarse Gaussians half transparent and blurred (demo capture: mean
     alpha 0.88 on garment pixels, L_rgb 0.0086 on the template frame vs 0.0034 for stage 1's texture), and the
@@ -165,6 +167,8 @@ def registration_texture(capture: Capture, project: Path, stage1: Stage1, factor
     texture = downsample_texture(stage1.texture, stage1.verts, stage1.faces, factor)
     source = template_frame(capture, project)
     if factor == 1 or refit == 0 or source is None:
+        if progress is not None and factor > 1 and refit > 0:
+            progress.step("registration texture: template frame unknown, not refitted", advance=refit)
         return texture, {"steps": 0, "reason": "not coarsened" if factor == 1 else
                          "refit off" if refit == 0 else "template frame unknown"}
     from ..gaussians.texture import GaussianTexture  # noqa: PLC0415 - torch
@@ -175,10 +179,12 @@ def registration_texture(capture: Capture, project: Path, stage1: Stage1, factor
     if path.is_file() and log_path.is_file():
         log = json.loads(log_path.read_text())
         if log.get("key") == key:
+            if progress is not None:
+                progress.step("registration texture: refitted earlier, reused", advance=refit)
             with np.load(path) as data:
                 return GaussianTexture.from_state({k: data[k] for k in data.files}), {**log, "reused": True}
     views = load_views(seq, frame, body=load_body(seq, frame))
-    texture, fit = fit_appearance(texture, stage1.verts, stage1.faces, views, refit,
+    texture, fit = fit_appearance(texture, stage1.verts, stage1.faces, views, refit, progress,
                                   config=AppearanceConfig(init_colors=False))
     log = {"key": key, "steps": refit, "frame": f"{seq.name}/{frame}", "rgb_loss_before": fit["rgb_loss_before"],
            "rgb_loss_after": fit["rgb_loss_after"], "seconds": fit["seconds"]}
@@ -269,8 +275,9 @@ def run_register(req: RegisterRequest) -> Path:
     factor = req.texture_factor or texture_factor(stage1.texture, load_views(first, frames_of[first.name][0]))
     options = {"config": asdict(config), "ablation": req.ablation, "align": req.align, "icp_scale": req.icp_scale,
                "texture_factor": factor, "texture_refit": req.texture_refit}
-    progress = Progress(STAGE, sum(len(f) + 1 for f in frames_of.values()) + 1, req.progress)
-    texture, refit_log = registration_texture(capture, project, stage1, factor, req.texture_refit)
+    progress = Progress(STAGE, sum(len(f) + 1 for f in frames_of.values()) + 1 +
+                        (req.texture_refit if factor > 1 else 0), req.progress)
+    texture, refit_log = registration_texture(capture, project, stage1, factor, req.texture_refit, progress)
     progress.step(f"registration texture: 1/{factor} resolution" + (
         f", refitted: L_rgb {refit_log['rgb_loss_before']:.4f} -> {refit_log['rgb_loss_after']:.4f}"
         if refit_log["steps"] else ""))
