@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -78,6 +79,12 @@ class GaussianTexture:
                    None if get("texels") is None else np.asarray(get("texels"), np.int64),
                    None if get("uvs") is None else np.asarray(get("uvs"), np.float64),
                    None if get("face_uvs") is None else np.asarray(get("face_uvs"), np.int64))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "GaussianTexture":
+        """The texture stored by storage.write_npz(path, **texture.state())."""
+        with np.load(path) as data:
+            return cls.from_state({k: data[k] for k in data.files})
 
 
 def uv_atlas(verts: np.ndarray, faces: np.ndarray, resolution: int, padding: int = 2) -> tuple[np.ndarray, np.ndarray]:

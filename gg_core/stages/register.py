@@ -75,8 +75,7 @@ def load_stage1(project: Path) -> Stage1:
             raise InputError("stage 1 output missing", path, "run gg template first")
     verts, faces, _, _ = read_obj(obj)
     try:
-        with np.load(gauss) as data:
-            texture = GaussianTexture.from_state({k: data[k] for k in data.files})
+        texture = GaussianTexture.load(gauss)
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(f"gaussians.npz cannot be read ({exc.__class__.__name__})", gauss,
                          "run gg template again") from None
@@ -181,8 +180,7 @@ def registration_texture(capture: Capture, project: Path, stage1: Stage1, factor
         if log.get("key") == key:
             if progress is not None:
                 progress.step("registration texture: refitted earlier, reused", advance=refit)
-            with np.load(path) as data:
-                return GaussianTexture.from_state({k: data[k] for k in data.files}), {**log, "reused": True}
+            return GaussianTexture.load(path), {**log, "reused": True}
     views = load_views(seq, frame, body=load_body(seq, frame))
     texture, fit = fit_appearance(texture, stage1.verts, stage1.faces, views, refit, progress,
                                   config=AppearanceConfig(init_colors=False))

@@ -9,6 +9,7 @@ import trimesh
 from gg_core.errors import InputError
 from gg_core.gaussians import texture as tex
 from gg_core.gaussians.sh import C0
+from gg_core.storage import write_npz
 
 
 @pytest.fixture(scope="module")
@@ -74,6 +75,13 @@ def test_scatter_gather_roundtrip_and_state(atlas_texture):
     assert (image.abs().sum(-1) > 0).sum() == len(atlas_texture)
     again = tex.GaussianTexture.from_state(atlas_texture.state())
     assert np.array_equal(again.face_ids, atlas_texture.face_ids) and torch.equal(again.params, atlas_texture.params)
+
+
+def test_a_stored_texture_loads_back_unchanged(atlas_texture, tmp_path):
+    path = write_npz(tmp_path / "texture.npz", **atlas_texture.state())
+    again = tex.GaussianTexture.load(path)
+    assert torch.equal(again.params, atlas_texture.params) and again.resolution == atlas_texture.resolution
+    assert np.array_equal(again.texels, atlas_texture.texels) and np.array_equal(again.face_uvs, atlas_texture.face_uvs)
 
 
 def test_one_gaussian_per_face(sphere):
