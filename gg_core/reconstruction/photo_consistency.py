@@ -14,21 +14,21 @@ Measured with the body and not kept: also hiding vertices behind the refined gar
 the argmax and quadratic fit (peaks > 1 cm off 20 -> 18 %), prominence instead of peak height as confidence
 (CD 1.06 cm), denoising the 8-sample renders first (Gaussian 0.7 px: 0.648 cm, non-local means: 0.736 cm).
 
-Where the template still erred before the body hid the garment (demo capture, 00_walk frame 0, 8.8 mm
-pixels): the hull alone has CD 1.23 cm, area 0.58 m^2 against the true 0.64, every point more than 1 cm off lies
-in a valley the hull bridges; after this refinement CD 0.62 cm, but area 0.53 m^2, and of the points still more than 1 cm off 43 % are in valleys and 47 %
-where the surface was pulled inside the cloth (the smooth offset field drags ridges in with their valleys). Measured
-and not kept: holding vertices on silhouette rims (projecting within 1 px of an outline, seen within 17 degrees of
-edge-on) at the hull, CD 1.01 / 1.21 cm at weight 1 / 10: it also holds the valleys' neighbours. More rounds (5:
-0.608 cm), a softer field (stiffness 1: 0.621), wider search (10 cm: 0.775), larger patches (7: 0.662) or more
-grazing cameras (cosine 0.3: 0.645) do not help; nor does a robust (Charbonnier, IRLS) smoothness that lets
-neighbouring offsets differ by more than 2 / 5 / 10 mm (0.634 / 0.619 / 0.620). The sweep itself is the limit: the
-first round's peaks against the true surface along the hull normal, confident vertices: median error 4 mm (half
-a pixel), 60 % within 5 mm, 9 % more than 1 cm too deep and 9 % more than 1 cm too shallow; seen by only 2 cameras,
-30 % within 5 mm (ray cast to the demo capture's true surface). Swept on the true surface itself, along its true
-normals, with visibility decided on it and the body: the peak is still more than 1 cm off at 18 % of the vertices
-(median 3.6 mm; no camera pair stands out), so at 8.8 mm pixels the matching itself, not the geometry it starts
-from, bounds what this refinement can reach.
+Where the template still erred before the body hid the garment (demo capture, 00_walk frame 0, 8.8 mm pixels): the
+hull alone has CD 1.23 cm, area 0.58 m^2 against the true 0.64, every point more than 1 cm off lies in a valley the
+hull bridges; after this refinement CD 0.62 cm, but area 0.53 m^2, and of the points still more than 1 cm off 43 %
+are in valleys and 47 % where the surface was pulled inside the cloth (the smooth offset field drags ridges in with
+their valleys). Measured and not kept: holding vertices on silhouette rims (projecting within 1 px of an outline,
+seen within 17 degrees of edge-on) at the hull, CD 1.01 / 1.21 cm at weight 1 / 10: it also holds the valleys'
+neighbours. More rounds (5: 0.608 cm), a softer field (stiffness 1: 0.621), wider search (10 cm: 0.775), larger
+patches (7: 0.662) or more grazing cameras (cosine 0.3: 0.645) do not help; nor does a robust (Charbonnier, IRLS)
+smoothness that lets neighbouring offsets differ by more than 2 / 5 / 10 mm (0.634 / 0.619 / 0.620). The sweep
+itself is the limit: the first round's peaks against the true surface along the hull normal, confident vertices:
+median error 4 mm (half a pixel), 60 % within 5 mm, 9 % more than 1 cm too deep and 9 % more than 1 cm too shallow;
+seen by only 2 cameras, 30 % within 5 mm (ray cast to the demo capture's true surface). Swept on the true surface
+itself, along its true normals, with visibility decided on it and the body: the peak is still more than 1 cm off at
+18 % of the vertices (median 3.6 mm; no camera pair stands out), so at 8.8 mm pixels the matching itself, not the
+geometry it starts from, bounds what this refinement can reach.
 """
 from __future__ import annotations
 

@@ -19,22 +19,22 @@ shrinks the rest shape of a garment that turned between the two (measured: CD ag
 frame of a walking sequence while the photometric loss rose).
 
 Schedule per frame: `iterations` Adam steps with an exponentially decaying learning rate on the smooth
-parameterization u = (I + lam L) x of the vertices (smooth_param; measured on the demo capture, frame 4 started
-from the ground truth of frame 2, 100 steps: CD 0.66 -> 0.37 cm with lam 10 vs 0.66 -> 0.49 cm on plain
-vertices), two random cameras per step, SH colours and Gaussian visibility per camera refreshed every few
-steps, body contacts every few steps. Measured and left off by default: a coarse phase on half-resolution
-images (frame 6 from frame 4: CD 0.72 vs 0.48 cm without), Adam with one second moment for all vertices (no better), early stopping (the fits
-never settle: per-frame appearance changes keep the gradients noisy). What limits accuracy is the objective,
-not the optimizer: started at the ground truth of a frame, the fit drifts 0.3-0.45 cm away from it even with
-all cameras per step and small steps, because the Gaussian texture (fitted on the template frame) does not
-reproduce the shading of other poses; the error then accumulates by about 0.05 cm per frame. Measured and not
-kept: a static studio lighting fitted with the vertices (order-2 SH irradiance per channel, each Gaussian's colour
-scaled by E(n_frame) / E(n_template) of its face normal): walk frames 0-11, mean CD 0.809 cm with the normals
-differentiable, 0.765 cm with them detached, 0.767 cm without, so diffuse shading of turned faces is not
-what drifts (shadows and occlusion by the moving body are the remaining suspects). Part of it is
-under-convergence: 200 iterations per frame instead of 100 give 0.739 cm on the same frames (frame 11: 0.95 vs
-1.06 cm), and on all 3 x 30 frames of the demo capture CD 0.80 vs 0.89 cm, p2m 0.73 vs 0.82 cm, F@1cm 72.9 vs
-69.2 %, at 17.1 s per frame (the issue's limit is 20 s): the default since then.
+parameterization u = (I + lam L) x of the vertices (smooth_param; measured on the demo capture, frame 4 started from
+the ground truth of frame 2, 100 steps: CD 0.66 -> 0.37 cm with lam 10 vs 0.66 -> 0.49 cm on plain vertices), two
+random cameras per step, SH colours and Gaussian visibility per camera refreshed every few steps, body contacts
+every few steps. Measured and left off by default: a coarse phase on half-resolution images (frame 6 from frame 4:
+CD 0.72 vs 0.48 cm without), Adam with one second moment for all vertices (no better), early stopping (the fits
+never settle: per-frame appearance changes keep the gradients noisy). What limits accuracy is the objective, not the
+optimizer: started at the ground truth of a frame, the fit drifts 0.3-0.45 cm away from it even with all cameras per
+step and small steps, because the Gaussian texture (fitted on the template frame) does not reproduce the shading of
+other poses; the error then accumulates by about 0.05 cm per frame. Measured and not kept: a static studio lighting
+fitted with the vertices (order-2 SH irradiance per channel, each Gaussian's colour scaled by E(n_frame) /
+E(n_template) of its face normal): walk frames 0-11, mean CD 0.809 cm with the normals differentiable, 0.765 cm with
+them detached, 0.767 cm without, so diffuse shading of turned faces is not what drifts (shadows and occlusion by the
+moving body are the remaining suspects). Part of it is under-convergence: 200 iterations per frame instead of 100
+give 0.739 cm on the same frames (frame 11: 0.95 vs 1.06 cm), and on all 3 x 30 frames of the demo capture CD 0.80
+vs 0.89 cm, p2m 0.73 vs 0.82 cm, F@1cm 72.9 vs 69.2 %, at 17.1 s per frame (the issue's limit is 20 s): the default
+since then.
 How well the Gaussian texture is converged matters more than the optimizer (2026-11-25, demo walk frame 0 fitted
 from the 0.525 cm template with L_rgb alone): with the block-averaged registration texture the fit drifts to
 0.604 cm; with that texture refitted on the template frame for 300 / 1000 / 2500 steps to 0.592 / 0.550 / 0.527
@@ -44,7 +44,7 @@ walk frames 0-11 from the 0.52 cm template (per-entry Adam: CD 0.617 cm): one se
 0.76 cm by frame 11); one second moment as the mean square: 0.784 cm (frame 0 0.53, frame 11 1.06); per-entry
 Adam with the mean square added to the denominator: 0.619 / 0.616 cm (lr 2e-3 / 4e-3); a learning rate decaying to
 0.02 instead of 0.1: 0.617 cm; L1 on high-passed images (sigma 2 px, against pose-dependent shading) with the
-2500-step texture: 0.557 cm, the same as without.
+2500-step texture: 0.557 cm, the same as without, so pose-dependent shading is at most a small part of the drift.
 """
 from __future__ import annotations
 
