@@ -139,6 +139,17 @@ def _heat_map(scene: Scene, result: str, verts: np.ndarray, faces: np.ndarray, v
     return _replace_object(obj, _results_collection(scene))
 
 
+def _second_map(obj: Object, values: np.ndarray, attribute: str) -> None:
+    """One more colour attribute on a heat-map object (switch to it in the viewport); the first stays shown."""
+    attributes = obj.data.color_attributes
+    shown = attributes.active_color_name
+    colors, vmax = heat_colors(values)
+    vertex_colors(obj, colors, attribute)
+    obj[f"gg_{attribute}_max"] = vmax
+    attributes.active_color = attributes[shown]
+    attributes.render_color_index = attributes.active_color_index
+
+
 def _report(project: Path, stage: str, how: str) -> dict:
     path = _required(project / "reports" / f"{stage}.json", how)
     try:
@@ -188,7 +199,14 @@ class GG_OT_show_residuals(_Loader):
         if residual.shape != (len(verts),):
             raise InputError(f"residual map has {residual.shape} values for {len(verts)} vertices",
                              project / "diagnose", "run Diagnose Physics again")
-        _heat_map(scene, "diagnosis_residual", verts, faces, residual, "residual")
+        obj = _heat_map(scene, "diagnosis_residual", verts, faces, residual, "residual")
+        activity_path = project / "diagnose" / "activity_vertex.npy"
+        if activity_path.is_file():      # written since the deformation-activity localization
+            activity = np.load(activity_path)
+            if activity.shape != (len(verts),):
+                raise InputError(f"activity map has {activity.shape} values for {len(verts)} vertices",
+                                 project / "diagnose", "run Diagnose Physics again")
+            _second_map(obj, np.maximum(-activity, 0.0), "stiffer_than_modelled")
         scene.gg.diagnosis = summary(report)
         return scene.gg.diagnosis
 

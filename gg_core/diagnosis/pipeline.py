@@ -11,13 +11,13 @@ import numpy as np
 from ..jobs import Progress
 from ..physics.cloth import Cloth
 from ..physics.contact import BodyCollider
-from ..physics.fitting import BehaviorParams, FitConfig, Observed, fit_behavior, rollout_error
+from ..physics.fitting import BehaviorParams, FitConfig, Observed, fit_behavior, free_rollout, rollout_error
 from ..physics.forces import DEFAULT_TERMS, TERMS, make_terms
 from ..physics.simulator import ImplicitSimulator
 from .confirm import Trial, trial
 from .features import FEATURES, state_features
 from .library import BY_NAME, CANDIDATES, Candidate, Context
-from .localize import Localization, localize
+from .localize import Localization, activity_map, localize
 from .residuals import FrameBatch, Pooling, build_frames, make_pooling, nuisance_changes, residual, responses
 from .selection import Design, Selection, fit, gram, select
 
@@ -114,7 +114,9 @@ class Result:
                                               "meaning": FEATURES.get(loc.step_feature[0], "")},
                              "vertex_map_max": float(loc.vertex_map.max()),
                              "vertex_map_median": float(np.median(loc.vertex_map[loc.vertex_map > 0])),
-                             "region_vertices": None if loc.region is None else np.flatnonzero(loc.region).tolist()},
+                             "region_vertices": None if loc.region is None else np.flatnonzero(loc.region).tolist(),
+                             "region_source": loc.region_source,
+                             "activity_z_range": [float(loc.activity_map.min()), float(loc.activity_map.max())]},
             "train_rollout_l2_before": self.null.train_l2,
             "reference_trials": {n: {"heldout_l2": t.heldout_l2, "heldout_gain": self.gain(t),
                                      "train_rollout_gain": self.train_gain(t), "refit": t.values}
@@ -191,7 +193,9 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     y, n_cols = pooling.rows(res), pooling.rows(nuisance).T
     adjust, *_ = np.linalg.lstsq(n_cols, y, rcond=None)
     adjusted = res - np.einsum("k,knvc->nvc", adjust, nuisance)
-    loc = localize(sim, pooling, adjusted, state_features(sim, batch, pooling))
+    activity = activity_map([obs.garment[1:] for obs in train], [free_rollout(sim, obs) for obs in train],
+                            sim.num.edges, sim.num.free > 0)
+    loc = localize(sim, pooling, adjusted, state_features(sim, batch, pooling), activity)
     progress.step("residual measured and localized")
     timings["residual_s"] = time.perf_counter() - t0
 

@@ -8,7 +8,8 @@ it through the force library, refit, and show the held-out rollout error before 
    `fit_horizon` frames ahead of observed states (pipeline.fit_config).
 2. Residual: the one-frame position error of the simulator's own step on the training sequences, pooled in the
    weak form, after re-adjusting the global parameters to it (gg_core/diagnosis/residuals.py).
-3. Localization: per-vertex map, per-frame curve, their best-correlated state features, the standout region.
+3. Localization: per-vertex map, per-frame curve, their best-correlated state features, the standout region
+   (first from the deformation activity: where the cloth stretches less than the baseline's own rollouts say).
 4. Selection: forward sparse regression on the candidate library with a moving-block bootstrap.
 5. Confirmation: the selected candidates, then the others by the share of the residual they explain, up to
    `max_trials`, are each added to the simulator and refitted; the best is accepted only if the held-out
@@ -20,6 +21,7 @@ optionally with spatially correlated noise (motion.py: `--source`, auto by defau
 the train / held-out split the behaviour stage uses.
 
 Outputs: P/reports/diagnose.json, P/reports/diagnose.html, P/diagnose/residual_vertex.npy ([V], m/s^2),
+P/diagnose/activity_vertex.npy ([V], robust z of the recorded over the simulated strain activity),
 P/diagnose/residual_frame.json, P/diagnose/template.ply (the mesh the vertex map refers to).
 """
 from __future__ import annotations
@@ -159,8 +161,10 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
                       reference_region, Progress(STAGE, 9 + req.max_trials + len(req.reference), req.progress))
 
     out = project / "diagnose"
-    with atomic_path(out / "residual_vertex.npy") as tmp:
-        np.save(tmp, result.localization.vertex_map.astype(np.float32))
+    for name, values in (("residual_vertex", result.localization.vertex_map),
+                         ("activity_vertex", result.localization.activity_map)):
+        with atomic_path(out / f"{name}.npy") as tmp:
+            np.save(tmp, values.astype(np.float32))
     write_json(out / "residual_frame.json", result.frame_curve(train))
     write_ply(out / "template.ply", train[0].garment[0], faces)
     payload = result.summary()
@@ -170,6 +174,9 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
         "attached_vertices": int(attached.sum()),
         "outputs": {"residual_vertex": str(out / "residual_vertex.npy"),
                     "residual_vertex_unit": "m/s^2 (one-frame position error over the frame time squared)",
+                    "activity_vertex": str(out / "activity_vertex.npy"),
+                    "activity_vertex_unit": "robust z-score of log(recorded / simulated strain activity); below 0 the "
+                                            "cloth stretches less than the model says (stiffer), above 0 more",
                     "residual_frame": str(out / "residual_frame.json"), "template": str(out / "template.ply"),
                     "html": str(project / "reports" / f"{STAGE}.html")},
         "inputs": key,

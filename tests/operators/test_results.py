@@ -97,12 +97,14 @@ def test_fitted_material_of_wrong_length_is_refused(blender, tmp_path):
         blender.ops.gg.show_behavior()
 
 
-def _write_diagnosis(project: Path, report: dict, residual: np.ndarray) -> None:
+def _write_diagnosis(project: Path, report: dict, residual: np.ndarray, activity: np.ndarray | None = None) -> None:
     (project / "reports").mkdir(parents=True)
     (project / "diagnose").mkdir()
     (project / "reports" / "diagnose.json").write_text(json.dumps(report))
     write_ply(project / "diagnose" / "template.ply", QUAD, TRIS)
     np.save(project / "diagnose" / "residual_vertex.npy", residual)
+    if activity is not None:
+        np.save(project / "diagnose" / "activity_vertex.npy", activity)
 
 
 def test_residual_map_colours_the_garment_and_states_the_verdict(blender, tmp_path):
@@ -117,6 +119,19 @@ def test_residual_map_colours_the_garment_and_states_the_verdict(blender, tmp_pa
     colors = colors.reshape(4, 4)
     assert not np.allclose(colors[0], colors[3])  # low and high residual differ
     assert blender.context.scene.gg.diagnosis == "Missing physics: air_drag (+42% held-out)"
+
+
+def test_activity_map_is_a_second_attribute_with_the_residual_still_shown(blender, tmp_path):
+    _write_diagnosis(tmp_path, {"verdict": "none"}, np.array([0.0, 1.0, 2.0, 4.0]), np.array([-6.0, 0.0, 1.0, 2.0]))
+    blender.context.scene.gg.project_path = str(tmp_path)
+    assert blender.ops.gg.show_residuals() == {"FINISHED"}
+    obj = blender.data.objects["diagnosis_residual"]
+    assert obj.data.color_attributes.active_color_name == "residual"
+    colors = np.empty(4 * 4, np.float32)
+    obj.data.color_attributes["stiffer_than_modelled"].data.foreach_get("color", colors)
+    colors = colors.reshape(4, 4)
+    assert not np.allclose(colors[0], colors[1]) and np.allclose(colors[1], colors[3])  # only the stiff vertex
+    assert obj["gg_stiffer_than_modelled_max"] > 0
 
 
 def test_residual_map_of_wrong_length_is_refused(blender, tmp_path):
