@@ -32,10 +32,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="coarsen the stage 1 Gaussian texture by this power of two for registration (default: "
                              "automatic, about one Gaussian per garment pixel; 1 keeps it: slower, on the demo "
                              "capture 0.08 cm lower CD)")
-    parser.add_argument("--texture-refit", type=int, default=2500, metavar="STEPS",
+    parser.add_argument("--texture-refit", type=int, default=1250, metavar="STEPS",
                         help="appearance steps refitting the coarsened texture on the template frame before "
-                             "tracking (default 2500, about 100 s on the demo capture: lowest CD; 300: 12 s, "
-                             "higher F@1cm; 0: off)")
+                             "tracking, at twice the appearance fit's learning rates (default 1250, about 55 s on "
+                             "the demo capture; fewer: faster, the mesh drifts more; 0: off)")
     parser.add_argument("--renders", type=int, default=3, help="frames per sequence rendered for inspection")
     parser.add_argument("--seed", type=int, default=0, help="seed of the camera sampling")
     add_progress_option(parser)

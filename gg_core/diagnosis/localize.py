@@ -10,9 +10,10 @@ over time in the recording against in the baseline's own free rollouts of the sa
 temporal standard deviation of edge strain, as a robust z-score). A stiffer patch stretches less than the model
 says whatever else the model gets wrong, because the comparison is local and relative. Measured on the benchmark's
 stiff-patch capture (seed 1, 35 true vertices): the residual map ranked the patch barely above the rest (AUC 0.67,
-no region), the activity ratio found a 29-vertex region, 83 % of it on the patch (69 % of the patch), and on the
-`none` and `shrink` captures no low-activity region. The residual region is the fallback where no activity region
-stands out.
+no region), the activity ratio found a 29-vertex region, 83 % of it on the patch (69 % of the patch); seed 2: 33
+vertices, 85 % on the patch (80 % of it). It is not proof of an effect: on the `none` capture of seed 2 it found a
+15-vertex region along the hem (z down to -7.2), whose region trials then gained < 1 % held-out, so confirmation
+said "none". The residual region is the fallback where no activity region stands out.
 """
 from __future__ import annotations
 
@@ -117,9 +118,9 @@ def activity_map(recorded: list[np.ndarray], simulated: list[np.ndarray], edges:
 
 def activity_region(z: np.ndarray, free: np.ndarray, edges: np.ndarray) -> np.ndarray | None:
     """The standout region of the activity map on its low side: cloth that stretches less than modelled (a stiffer
-    region). The high side is not used: on benchmark captures with no region effect (`none`, `shrink`) it holds
-    blobs of z 4.8-5.7 just above the hem, where folds flap more in Blender's cloth than in ours, while the low side
-    stays above -2.3; softer regions are left to the residual region."""
+    region). The high side is not used: on the seed-1 benchmark captures with no region stiffness effect (`none`,
+    `shrink`) it holds blobs of z 4.8-5.7 just above the hem, where folds flap more in Blender's cloth than in
+    ours, while the low side stays above -2.3 there; softer regions are left to the residual region."""
     return standout_region(-z, free, edges)
 
 
