@@ -43,7 +43,7 @@ class Localization:
 
 
 def _smooth(field: np.ndarray, edges: np.ndarray, passes: int = 2) -> np.ndarray:
-    """Average each vertex with its one-ring ([..., V, 3]): internal-force noise alternates sign between
+    """Average each vertex with its one-ring ([..., V, C]): internal-force noise alternates sign between
     neighbours and cancels, a missing external force does not."""
     n = field.shape[-2]
     adj = coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
@@ -110,7 +110,7 @@ def activity_map(recorded: list[np.ndarray], simulated: list[np.ndarray], edges:
     rec = np.mean([strain_activity(f, edges) for f in recorded], 0)
     sim = np.mean([strain_activity(f, edges) for f in simulated], 0)
     tiny = 1e-12 + 1e-6 * float(np.median(rec[free]))
-    ratio = _smooth(np.repeat(np.log((rec + tiny) / (sim + tiny))[:, None], 3, 1), edges, passes=1)[:, 0]
+    ratio = _smooth(np.log((rec + tiny) / (sim + tiny))[:, None], edges, passes=1)[:, 0]
     med = np.median(ratio[free])
     mad = 1.4826 * np.median(np.abs(ratio[free] - med))
     return np.where(free, (ratio - med) / max(mad, 1e-12), 0.0)

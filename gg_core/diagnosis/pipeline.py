@@ -11,7 +11,8 @@ import numpy as np
 from ..jobs import Progress
 from ..physics.cloth import Cloth
 from ..physics.contact import BodyCollider
-from ..physics.fitting import BehaviorParams, FitConfig, Observed, fit_behavior, free_rollout, rollout_error
+from ..physics.fitting import (BehaviorParams, FitConfig, Observed, fit_behavior, free_rollout, rollout_distance,
+                               rollout_error)
 from ..physics.forces import DEFAULT_TERMS, TERMS, make_terms
 from ..physics.simulator import ImplicitSimulator
 from .confirm import Trial, trial
@@ -139,8 +140,9 @@ def fit_config(req: DiagnoseRequest, iterations: int) -> FitConfig:
 
 def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, body_faces: np.ndarray,
               attached: np.ndarray, hands: np.ndarray | None, progress: Progress
-              ) -> tuple[ImplicitSimulator, BehaviorParams, dict[str, float]]:
-    """The global-parameter fit from each of MARGIN_STARTS, kept by the training sequences' free-rollout error.
+              ) -> tuple[ImplicitSimulator, BehaviorParams, dict[str, float], list[np.ndarray]]:
+    """The global-parameter fit from each of MARGIN_STARTS, kept by the training sequences' free-rollout error;
+    also returns the kept fit's free rollouts of the training sequences (the activity map compares them).
 
     The teacher-forced loss starts every step from an observed state, so with noisy positions near the body the
     contact margin has several local minima (measured on a capture with 1.5 mm noise: the fit stayed at the 3 mm
@@ -164,12 +166,13 @@ def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, bo
             "viscoelastic_damping": {"tau": INITIAL_LOSS_FACTOR / (2.0 * np.pi)}})
         sim = ImplicitSimulator(cloth, terms=terms, collider=collider, fps=req.fps, substeps=req.substeps)
         params, _ = fit_behavior(sim, train, fit_config(req, req.baseline_iterations))
-        error = float(np.mean([rollout_error(sim, obs, attached) for obs in train]))
+        rollouts = [free_rollout(sim, obs) for obs in train]
+        error = float(np.mean([rollout_distance(r, obs, attached) for r, obs in zip(rollouts, train)]))
         starts[f"margin_start_{scale:g}x_train_rollout_l2"] = error
         if best is None or error < best[2]:
-            best = (sim, params, error)
+            best = (sim, params, error, rollouts)
     progress.step("baseline fitted (global parameters only)")
-    return best[0], best[1], starts
+    return best[0], best[1], starts, best[3]
 
 
 def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed], faces: np.ndarray,
@@ -179,7 +182,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     collide, `reference_region` the region reference trials of region candidates use."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    sim, params, starts = _baseline(req, train, faces, body_faces, attached, hands, progress)
+    sim, params, starts, train_rollouts = _baseline(req, train, faces, body_faces, attached, hands, progress)
     baseline_l2 = float(np.mean([rollout_error(sim, obs, attached) for obs in heldout]))
     timings["baseline_s"] = time.perf_counter() - t0
 
@@ -193,8 +196,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     y, n_cols = pooling.rows(res), pooling.rows(nuisance).T
     adjust, *_ = np.linalg.lstsq(n_cols, y, rcond=None)
     adjusted = res - np.einsum("k,knvc->nvc", adjust, nuisance)
-    activity = activity_map([obs.garment[1:] for obs in train], [free_rollout(sim, obs) for obs in train],
-                            sim.num.edges, sim.num.free > 0)
+    activity = activity_map([obs.garment[1:] for obs in train], train_rollouts, sim.num.edges, sim.num.free > 0)
     loc = localize(sim, pooling, adjusted, state_features(sim, batch, pooling), activity)
     progress.step("residual measured and localized")
     timings["residual_s"] = time.perf_counter() - t0
