@@ -34,6 +34,15 @@ def add_progress_option(parser: argparse.ArgumentParser) -> None:
                              "for the Blender job runner, or nothing")
 
 
+def add_sim_vertices_option(parser: argparse.ArgumentParser) -> None:
+    from .stages.motion import SIM_VERTICES  # noqa: PLC0415 - light (no torch), keeps the default in one place
+
+    parser.add_argument("--sim-vertices", type=int, default=SIM_VERTICES,
+                        help="garment meshes with more vertices (registered meshes have the template's) are "
+                             "simulated on a remeshed copy of about this many that follows the observed surfaces; "
+                             "0 simulates the observed mesh itself")
+
+
 def add_source_option(parser: argparse.ArgumentParser) -> None:
     from .stages.motion import SOURCES  # noqa: PLC0415 - light (no torch), keeps the choices in one place
 

@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..cli import add_progress_option, add_source_option
+from ..cli import add_progress_option, add_sim_vertices_option, add_source_option
 
 HELP = "stage 4: fit material and rest lengths to the registered motion; evaluate on held-out sequences"
 
@@ -22,6 +22,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="add Gaussian noise of this standard deviation (mm) to the garment meshes")
     parser.add_argument("--attach-tol-mm", type=float, default=3.0,
                         help="vertices that stay this close to a fixed place on the body are attached (pinned)")
+    add_sim_vertices_option(parser)
     parser.add_argument("--global-iterations", type=int, default=20, help="L-BFGS iterations of the global fit")
     parser.add_argument("--local-iterations", type=int, default=20,
                         help="L-BFGS iterations of the per-vertex material / rest length fit (0 skips it)")
@@ -54,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
     chosen = {k: v for k, v in (("max_samples", args.max_samples), ("horizon", args.fit_horizon)) if v is not None}
     req = BehaviorRequest(capture=args.capture, project=args.project, train=args.train, heldout=args.heldout,
                           forces=forces, source=args.source,
-                          noise_mm=args.noise_mm, attach_tol_mm=args.attach_tol_mm, fps=args.fps, substeps=args.substeps,
+                          noise_mm=args.noise_mm, attach_tol_mm=args.attach_tol_mm, sim_vertices=args.sim_vertices,
+                          fps=args.fps, substeps=args.substeps,
                           seed=args.seed,
                           fit=FitConfig(global_iterations=args.global_iterations,
                                         local_iterations=args.local_iterations, **chosen,

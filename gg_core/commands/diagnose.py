@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..cli import add_progress_option, add_source_option
+from ..cli import add_progress_option, add_sim_vertices_option, add_source_option
 
 HELP = "missing-physics diagnosis: residual map and curve, named effect, refit, held-out rollout error before/after"
 
@@ -27,6 +27,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "the data exceeds 0.5 mm (noisy velocities make any damping look right)")
     parser.add_argument("--attach-tol-mm", type=float, default=3.0,
                         help="vertices that stay this close to a fixed place on the body are attached (pinned)")
+    add_sim_vertices_option(parser)
     parser.add_argument("--baseline-iterations", type=int, default=15,
                         help="L-BFGS iterations of the global baseline fit")
     parser.add_argument("--refit-iterations", type=int, default=8,
@@ -50,7 +51,8 @@ def run(args: argparse.Namespace) -> int:
 
     req = DiagnoseRequest(capture=args.capture, project=args.project, source=args.source, train=args.train,
                           heldout=args.heldout, noise_mm=args.noise_mm, noise_length_mm=args.noise_length_mm,
-                          denoise=args.denoise, attach_tol_mm=args.attach_tol_mm, fps=args.fps,
+                          denoise=args.denoise, attach_tol_mm=args.attach_tol_mm, sim_vertices=args.sim_vertices,
+                          fps=args.fps,
                           substeps=args.substeps, seed=args.seed,
                           baseline_iterations=args.baseline_iterations, refit_iterations=args.refit_iterations,
                           max_samples=args.max_samples, fit_horizon=args.fit_horizon, min_gain=args.min_gain,

@@ -15,7 +15,9 @@ HELP = "simulate a garment mesh on a body sequence or motion and write one PLY p
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--garment", type=Path, required=True, help="garment mesh (PLY/OBJ, +Y up, metres)")
+    parser.add_argument("--garment", type=Path,
+                        help="garment mesh (PLY/OBJ, +Y up, metres); default with --behavior: the mesh it was fitted "
+                             "on (its template, remeshed when the registered meshes were finer than the simulator's)")
     body = parser.add_mutually_exclusive_group(required=True)
     body.add_argument("--body", type=Path, help="folder of body meshes, one per frame (sorted by name)")
     body.add_argument("--motion", help="built-in motion of the default body (e.g. walk, arm_swing, jump)")
@@ -88,7 +90,16 @@ def run(args: argparse.Namespace) -> int:
     from ..storage import write_json
     from ..synth.anchoring import bind
 
-    verts, faces = read_mesh(args.garment)
+    if args.behavior is not None and not args.behavior.is_file():
+        raise InputError("no fitted behaviour file", args.behavior, "run gg behavior first, or fix the path")
+    if args.garment is not None:
+        verts, faces = read_mesh(args.garment)
+    elif args.behavior is not None:
+        with np.load(args.behavior) as fitted:
+            verts, faces = fitted["template"], fitted["faces"]
+    else:
+        raise InputError("no garment to simulate", "--garment",
+                         "pass --garment MESH or --behavior P/stage4/behavior.npz")
     body, body_faces, hands = _body_frames(args)
     collider = BodyCollider(body_faces, body.shape[1], exclude=hands)
     values = {}

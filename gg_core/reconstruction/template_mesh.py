@@ -25,7 +25,7 @@ from .mask_vote import garment_vote
 from ..geometry.raycast import RayCaster
 from .mesh_graph import adjacency, face_components, genus, smooth, vertex_area, vertex_components
 from .photo_consistency import PhotoOptions, refine_along_normals
-from .remesh import edge_length_for, isotropic_remesh
+from .remesh import SLIVER_EDGE, edge_length_for, isotropic_remesh
 from .surface_cut import collapse_short_edges, cut_at_level, main_pieces, tidy_border
 from .visual_hull import Grid, Silhouette, hull_bounds
 
@@ -43,7 +43,6 @@ MIN_VERTICES = 300           # ... lowered until edges are no shorter than a pix
 FIELD_BLUR = 0.7
 GEOMETRY_STEPS = 6             # `step` callbacks of reconstruct_template (5 without photo-consistency)
 FINAL_REMESH_ITERATIONS = 3
-SLIVER_EDGE = 0.25           # edges shorter than this share of the target length are collapsed at the end   # evens out the triangles after the cut and the photo-consistency moves
 
 
 @dataclass

@@ -33,7 +33,7 @@ from ..physics.material import MATERIAL_NAMES
 from ..physics.simulator import ImplicitSimulator
 from ..storage import write_npz, write_report
 from ..synth.anchoring import bind
-from .motion import garment_files, inputs_key, load_sequence, resolve_source
+from .motion import SIM_VERTICES, garment_files, inputs_key, load_sequence, resolve_source, simulation_mesh
 
 STAGE = "behavior"
 
@@ -48,6 +48,7 @@ class BehaviorRequest:
     source: str = "auto"       # garment meshes fitted to: registered, gt or auto (motion.py)
     noise_mm: float = 0.0
     attach_tol_mm: float = 3.0
+    sim_vertices: int = SIM_VERTICES   # finer meshes are simulated on a remeshed copy (motion.simulation_mesh)
     fps: float = 30.0
     substeps: int = 2          # implicit steps per frame, in the fit and in the rollouts
     seed: int = 0
@@ -136,7 +137,8 @@ def run_behavior(req: BehaviorRequest) -> Path:
         loaded[n] = (obs, faces, body_faces)
     train = [loaded[n][0] for n in train_names]
     heldout = [loaded[n][0] for n in heldout_names]
-    faces, body_faces = loaded[train_names[0]][1], loaded[train_names[0]][2]
+    faces, mesh_log = simulation_mesh(train + heldout, loaded[train_names[0]][1], req.sim_vertices)
+    body_faces = loaded[train_names[0]][2]
     timings["load_s"] = time.perf_counter() - start
 
     attached = attached_vertices(train, body_faces, req.attach_tol_mm * 1e-3)
@@ -206,7 +208,8 @@ def run_behavior(req: BehaviorRequest) -> Path:
         "l2_per_sequence": per_sequence,
         "train_sequences": train_names, "heldout_sequences": heldout_names,
         "source": source,
-        "noise_mm": req.noise_mm, "vertices": cloth.n_vertices, "attached_vertices": int(attached.sum()),
+        "noise_mm": req.noise_mm, "vertices": cloth.n_vertices, "simulation_mesh": mesh_log,
+        "attached_vertices": int(attached.sum()),
         "fitted": {"global": params.global_values(), "terms": params.term_values(), "per_vertex": mat.summary(),
                    "rest_length_scale": {"mean": float(rest_scale.mean()), "min": float(rest_scale.min()),
                                          "max": float(rest_scale.max())}},

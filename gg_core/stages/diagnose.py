@@ -22,7 +22,8 @@ the train / held-out split the behaviour stage uses.
 
 Outputs: P/reports/diagnose.json, P/reports/diagnose.html, P/diagnose/residual_vertex.npy ([V], m/s^2),
 P/diagnose/activity_vertex.npy ([V], robust z of the recorded over the simulated strain activity),
-P/diagnose/residual_frame.json, P/diagnose/template.ply (the mesh the vertex map refers to).
+P/diagnose/residual_frame.json, P/diagnose/template.ply (the mesh the vertex maps and region refer to: the
+observed mesh, or its remeshed copy when it has more than `sim_vertices` vertices, motion.simulation_mesh).
 """
 from __future__ import annotations
 
@@ -40,7 +41,7 @@ from ..geometry.meshio import write_ply
 from ..jobs import Progress
 from ..storage import atomic_path, write_json, write_report
 from .behavior import attached_vertices, hand_mask, split
-from .motion import garment_files, inputs_key, load_sequence, resolve_source
+from .motion import SIM_VERTICES, garment_files, inputs_key, load_sequence, resolve_source, simulation_mesh
 
 STAGE = "diagnose"
 DENOISE = ("auto", "on", "off")
@@ -58,6 +59,7 @@ class DiagnoseRequest:
     noise_length_mm: float = 50.0      # its correlation length
     denoise: str = "auto"              # temporal smoothing: auto (when the estimated noise exceeds 0.5 mm), on, off
     attach_tol_mm: float = 3.0
+    sim_vertices: int = SIM_VERTICES   # finer meshes are simulated on a remeshed copy (motion.simulation_mesh)
     fps: float = 30.0
     substeps: int = 2
     seed: int = 0
@@ -149,10 +151,11 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     from ..diagnosis.report import write_html  # noqa: PLC0415
 
     loaded = load(req, capture, train_names + heldout_names, source)
-    denoised = denoise(req, loaded)
     train = [loaded[n][0] for n in train_names]
     heldout = [loaded[n][0] for n in heldout_names]
-    faces, body_faces = loaded[train_names[0]][1], loaded[train_names[0]][2]
+    faces, mesh_log = simulation_mesh(train + heldout, loaded[train_names[0]][1], req.sim_vertices)
+    body_faces = loaded[train_names[0]][2]
+    denoised = denoise(req, loaded)
     # noise moves attached vertices too: widen the tolerance by four standard deviations
     noise_mm = max(req.noise_mm, denoised.level_mm if denoised.smoothed else 0.0)
     attached = attached_vertices(train, body_faces, (req.attach_tol_mm + 4 * noise_mm) * 1e-3)
@@ -171,7 +174,7 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     payload.update({
         "train_sequences": train_names, "heldout_sequences": heldout_names, "source": source,
         "noise_mm": req.noise_mm, "denoising": denoised.to_json(), "vertices": len(train[0].garment[0]),
-        "attached_vertices": int(attached.sum()),
+        "simulation_mesh": mesh_log, "attached_vertices": int(attached.sum()),
         "outputs": {"residual_vertex": str(out / "residual_vertex.npy"),
                     "residual_vertex_unit": "m/s^2 (one-frame position error over the frame time squared)",
                     "activity_vertex": str(out / "activity_vertex.npy"),

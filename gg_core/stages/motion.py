@@ -24,6 +24,7 @@ if TYPE_CHECKING:   # torch stays out of `gg --help`, which lists SOURCES
     from ..physics.fitting import Observed
 
 SOURCES = ("auto", "registered", "gt")
+SIM_VERTICES = 1200     # default: finer observed meshes are simulated on a remeshed copy of about this many vertices
 
 
 def registered_files(project: Path, name: str) -> dict[str, Path]:
@@ -80,6 +81,31 @@ def load_sequence(seq: Sequence, files: dict[str, Path], fps: float) -> tuple[Ob
                          "register every frame to the template topology")
     garment = np.stack([m[0] for m in meshes])
     return Observed(seq.name, garment, np.stack([b[0] for b in bodies]), fps), meshes[0][1], bodies[0][1]
+
+
+def simulation_mesh(sequences: list[Observed], faces: np.ndarray, max_vertices: int) -> tuple[np.ndarray, dict]:
+    """(faces of the mesh the sequences are now on, a log): sequences observed on more than `max_vertices`
+    vertices (0: no limit) are carried, in place, onto a remeshed copy of their first frame with about that many.
+
+    Why: registered meshes have the template's resolution (7470 vertices on the demo capture), which the Gaussian
+    texture needs and the simulator does not; the fits' cost grows with the vertex count (a diagnosis took 54 min
+    there). Each coarse vertex is moved to its closest point on the first frame and follows that point's triangle
+    (barycentric coordinates, synth.anchoring) in every frame, so the coarse sequences lie on the observed
+    surfaces (the remesh's border relaxation had moved hem vertices up to 1 cm off the demo template)."""
+    from ..reconstruction.remesh import coarsen  # noqa: PLC0415 - gpytoolbox only where meshes are remeshed
+    from ..synth.anchoring import Anchors, bind  # noqa: PLC0415
+
+    n = sequences[0].garment.shape[1]
+    if max_vertices <= 0 or n <= max_vertices:
+        return faces, {"vertices": n, "observed_vertices": n, "remeshed": False}
+    rest = sequences[0].garment[0]
+    verts, coarse_faces = coarsen(rest, faces, max_vertices)
+    closest = bind(rest, faces, verts)
+    on_surface = Anchors(closest.triangles, closest.bary, np.zeros_like(closest.offset))
+    for obs in sequences:
+        obs.garment = on_surface.apply(obs.garment)
+    return coarse_faces, {"vertices": len(verts), "observed_vertices": n, "remeshed": True,
+                          "max_projection_mm": float(np.linalg.norm(closest.offset, axis=1).max() * 1e3)}
 
 
 def inputs_key(request: object, capture: Capture, names: list[str], source: str, project: Path) -> dict:

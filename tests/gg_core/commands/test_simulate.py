@@ -58,3 +58,26 @@ def test_bad_input_is_one_error_line(tmp_path, capsys):
     assert main(["simulate", "--garment", str(tmp_path / "g.ply"), "--motion", "walk", "--out", str(tmp_path / "o"),
                  "--force", "lift:coef=1"]) == 2
     assert capsys.readouterr().err.startswith("gg: error: unknown force terms")
+
+
+def test_a_fitted_behaviour_brings_its_own_garment_mesh(tmp_path):
+    """Behaviour fitted to fine registered meshes lives on a remeshed simulation mesh: --behavior alone
+    simulates that mesh; a missing file is one error line."""
+    from gg_core.physics.cloth import Cloth
+    from gg_core.physics.material import MATERIAL_NAMES, Material
+
+    bv, bf = uv_sphere(0.2, 16, 32)
+    for k in range(4):
+        write_ply(tmp_path / "body" / f"{k:04d}.ply", bv, bf)
+    v, f = sheet(6, 6, 0.4, 0.4, y=0.215)
+    cloth = Cloth(v, f, material=Material.uniform(len(v), density=0.2))
+    np.savez(tmp_path / "behavior.npz", template=v, faces=f, rest_lengths=cloth.rest_lengths.numpy(),
+             **{n: getattr(cloth.material, n).numpy() for n in MATERIAL_NAMES})
+    code = main(["simulate", "--behavior", str(tmp_path / "behavior.npz"), "--body", str(tmp_path / "body"),
+                 "--out", str(tmp_path / "out"), "--pin", "none", "--progress", "none"])
+    assert code == 0
+    last, faces = read_mesh(sorted((tmp_path / "out").glob("*.ply"))[-1])
+    assert len(last) == len(v) and np.array_equal(faces, f)
+    assert main(["simulate", "--behavior", str(tmp_path / "nope.npz"), "--body", str(tmp_path / "body"),
+                 "--out", str(tmp_path / "o")]) == 2
+    assert main(["simulate", "--body", str(tmp_path / "body"), "--out", str(tmp_path / "o")]) == 2
