@@ -61,6 +61,7 @@ class Trial:
     train_l2: float             # free-rollout error on the training sequences (the fit saw them only one frame ahead)
     values: dict[str, object] = field(default_factory=dict)
     seconds: float = 0.0
+    start: str = "regression"   # where the refit started: the regression's coefficients, or the probe sizes
 
 
 def merge(changes: list[ModelChange]) -> ModelChange:

@@ -89,6 +89,7 @@ class Result:
                              "where": self.localization.vertex_feature[0], "when": self.localization.step_feature[0],
                              "region_vertices": int(self.localization.region.sum())
                              if cand.needs_region and self.localization.region is not None else None},
+                "refit_start": None if t is None else t.start,
                 "heldout_l2": None if t is None else t.heldout_l2,
                 "heldout_gain": None if t is None else self.gain(t),
                 "train_rollout_gain": None if t is None else self.train_gain(t),
@@ -220,8 +221,8 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     proposed = propose(sel, req.min_inclusion, req.max_trials)
     trials = {}
     for n in proposed:
-        trials[n] = trial(sim, BASELINE_FIT, [(BY_NAME[n], sel.alone[n])], ctx, loc.region, train, heldout,
-                          attached, refit_config)
+        trials[n] = _trial_from_starts(BY_NAME[n], sel.alone[n], sim, ctx, train, heldout, attached, refit_config,
+                                       req.probe_acceleration)
         progress.step(f"trial {n}: held-out L2 {before * 1e3:.1f} -> {trials[n].heldout_l2 * 1e3:.1f} mm")
     unphysical = {n: why for n in proposed if (why := implausible(trials[n], sim.cloth))}
     passing = sorted((n for n in proposed
@@ -287,6 +288,27 @@ def propose(sel: Selection, min_inclusion: float, max_trials: int) -> list[str]:
     chosen = [n for n in sel.order if sel.inclusion[n] >= min_inclusion]
     others = sorted((n for n in sel.explained if n not in chosen), key=lambda n: -sel.explained[n])
     return (chosen + others)[:max_trials]
+
+
+def _trial_from_starts(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulator, ctx: Context,
+                       train: list[Observed], heldout: list[Observed], attached: np.ndarray, config: FitConfig,
+                       acceleration: float) -> Trial:
+    """The trial of `cand` started from its regression coefficients `coefs`; where the regression put nothing,
+    also from its probe sizes, keeping the start whose refit rolls the TRAINING sequences out better (the held-out
+    error stays unseen until the choice is made, as with the baseline's margin starts).
+
+    Why: the refits minimise a loss a few frames ahead, where internal damping and drag look alike, so a refit
+    started at zero drag stays there. Measured on the benchmark's hidden air damping (seed 1, noise 0): the
+    baseline's internal damping rose to a loss factor of 0.91 and the one-frame regression gave mass damping
+    nothing; its trial kept alpha at the default 1 /s and gained 0 %, where the same refit from the probe size
+    reached 10.3 /s and gained 24.5 % held-out and training."""
+    start = trial(sim, BASELINE_FIT, [(cand, coefs)], ctx, ctx.region, train, heldout, attached, config)
+    sizes = np.array([size for size, _ in cand.probes(ctx, acceleration)])
+    if np.any(coefs != 0) or not np.all(sizes > 0):
+        return start
+    probed = trial(sim, BASELINE_FIT, [(cand, sizes)], ctx, ctx.region, train, heldout, attached, config)
+    probed.start = "probe"
+    return probed if probed.train_l2 < start.train_l2 else start
 
 
 def _candidate_rows(ctx: Context, pooling: Pooling, predicted: np.ndarray, acceleration: float

@@ -36,6 +36,9 @@ from ..synth.anchoring import bind
 from .motion import SIM_VERTICES, garment_files, inputs_key, load_sequence, resolve_source, simulation_mesh
 
 STAGE = "behavior"
+ATTACH_FLOOR_SHARE = 0.02     # attached_vertices: the most body-fixed share of the vertices ...
+ATTACH_FLOOR_FACTOR = 1.5     # ... whose drift, times this, still counts as attached ...
+ATTACH_TOL_MAX = 0.01         # ... up to this (m): beyond, nothing in the garment is held by the body
 
 
 @dataclass
@@ -82,14 +85,22 @@ def hand_mask(n_body_vertices: int) -> np.ndarray | None:
 
 
 def attached_vertices(sequences: list[Observed], body_faces: np.ndarray, tol: float) -> np.ndarray:
-    """Vertices that stay at a fixed place relative to the nearest body triangle (within `tol` m) in every frame
-    of every sequence: sewn or elastic bands that follow the body."""
+    """Vertices that stay at a fixed place relative to the nearest body triangle in every frame of every
+    sequence (sewn or elastic bands that follow the body): within `tol` m, or within ATTACH_FLOOR_FACTOR times
+    what the garment's most body-fixed vertices drift (ATTACH_FLOOR_SHARE of them), up to ATTACH_TOL_MAX.
+
+    Why the second bound: registered meshes slide a little over the surface, so even a sewn band drifts by the
+    registration's error. Measured on the demo capture's registered meshes (remeshed to 1207 vertices): the
+    waistband drifts 3-6 mm, 3 vertices stayed within 3 mm (53 of 1178 in the ground truth), the skirt hung
+    from them and the diagnosis named 'wind' to hold it up (-22 % held-out). The best-attached 2 % drift 3.1 mm
+    there and under 1 mm in the ground truth, where the bound changes nothing."""
     worst = np.zeros(sequences[0].garment.shape[1])
     for obs in sequences:
         anchors = bind(obs.body[0], body_faces, obs.garment[0])
         err = np.linalg.norm(anchors.apply(obs.body) - obs.garment, axis=2).max(0)
         worst = np.maximum(worst, err)
-    return worst < tol
+    floor = float(np.quantile(worst, ATTACH_FLOOR_SHARE / 2))      # the median of the best-attached share
+    return worst < max(tol, min(ATTACH_FLOOR_FACTOR * floor, ATTACH_TOL_MAX))
 
 
 def truth_meshes(capture: Capture, names: list[str], source: str, project: Path

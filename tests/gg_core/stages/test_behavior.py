@@ -77,3 +77,32 @@ def test_progress_protocol(tmp_path, capsys):
     parsed = [parse_line(line) for line in capsys.readouterr().out.splitlines()]
     assert all(p is not None for p in parsed)
     assert parsed[-1]["done"] is True and parsed[-1]["report"].endswith("behavior.json")
+
+
+def _drifting(band_mm: float, free_mm: float, n_band: int = 40, n_free: int = 360, frames: int = 6):
+    """Garment points over a static body plane: a band whose points wander by `band_mm`, the rest by `free_mm`."""
+    from gg_core.physics.fitting import Observed
+
+    rng = np.random.default_rng(0)
+    g = np.linspace(-0.5, 0.5, 11)
+    body_v = np.array([[x, y, 0.0] for y in g for x in g])
+    body_f = np.array([[r * 11 + c, r * 11 + c + 1, r * 11 + c + 11] for r in range(10) for c in range(10)]
+                      + [[r * 11 + c + 1, r * 11 + c + 12, r * 11 + c + 11] for r in range(10) for c in range(10)])
+    rest = np.c_[rng.uniform(-0.4, 0.4, (n_band + n_free, 2)), np.full(n_band + n_free, 0.01)]
+    step = np.r_[np.full(n_band, band_mm), np.full(n_free, free_mm)][None, :, None] * 1e-3
+    garment = rest[None] + step * rng.uniform(-1, 1, (frames, n_band + n_free, 3)) / np.sqrt(3)
+    garment[0] = rest
+    return Observed("s", garment, np.repeat(body_v[None], frames, 0), 30.0), body_f
+
+
+def test_attachment_allows_for_the_drift_of_the_best_attached_vertices():
+    from gg_core.stages.behavior import attached_vertices
+
+    obs, body_f = _drifting(band_mm=0.5, free_mm=60)           # ground truth: a still band
+    attached = attached_vertices([obs], body_f, 0.003)
+    assert attached[:40].all() and not attached[40:].any()
+    obs, body_f = _drifting(band_mm=6, free_mm=60)             # registered: the band slides by the registration error
+    attached = attached_vertices([obs], body_f, 0.003)
+    assert attached[:40].mean() > 0.9 and not attached[40:].any()
+    obs, body_f = _drifting(band_mm=40, free_mm=60)            # nothing holds the garment: nothing is attached
+    assert not attached_vertices([obs], body_f, 0.003).any()
