@@ -1,8 +1,10 @@
 """Stage 4 (behaviour): fit the simulator's material and rest lengths to the garment's registered motion.
 
 Inputs: per sequence the registered garment meshes (template topology) and the body meshes; on synthetic captures
-the ground-truth meshes instead (motion.py: `--source`), optionally with added noise. The rest shape is the first training frame; vertices that move rigidly with the body surface in every
-training frame (waistbands, top bands) are treated as attached and follow their observed positions.
+the ground-truth meshes instead (motion.py: `--source`), optionally with added noise; meshes finer than
+`sim_vertices` are simulated on a remeshed copy (motion.simulation_mesh). The rest shape is the first training
+frame; vertices that move rigidly with the body surface in every training frame (waistbands, top bands) are
+treated as attached and follow their observed positions.
 
 Outputs: <project>/stage4/behavior.npz (template, faces, attached mask, per-vertex material, rest lengths) and
 <project>/reports/behavior.json (held-out and training L2 before/after, fitted parameters, timings).
