@@ -3,11 +3,11 @@
 A trial copies the baseline simulator, switches the candidates' force-library terms on (or scales the region's
 material fields), and refits the global material together with the candidates' coefficients on the training
 sequences (teacher-forced prediction a few frames ahead of observed states, L-BFGS, warm-started from the baseline
-and the regression's coefficients). Its held-out rollout error decides: an effect is accepted only if it lowers
-the error by at least `min_gain` relative to the baseline, and also lowers the free-rollout error of the training sequences (a real
-effect helps every recording; a term that only helps the held-out one got lucky among the many tried). The
-regression only proposes; rollouts decide, which also protects against effects that fit single frames but drift
-in free rollouts.
+and the regression's coefficients, or from probe sizes: pipeline._trial_from_starts). Its held-out rollout error
+decides: an effect is accepted only if it lowers the error by at least `min_gain` relative to the baseline, and
+also lowers the free-rollout error of the training sequences (a real effect helps every recording; a term that
+only helps the held-out one got lucky among the many tried). The regression only proposes; rollouts decide,
+which also protects against effects that fit single frames but drift in free rollouts.
 """
 from __future__ import annotations
 
