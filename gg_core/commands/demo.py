@@ -3,8 +3,8 @@
 Generates the synthetic demo capture (Blender cloth + Cycles; the body model and garment templates ship with
 the package, nothing is downloaded), validates it, reconstructs the template (stage 1), registers every frame
 (stage 2), fits the behaviour stage to the registered motion and runs the missing-physics diagnosis on the
-capture's ground-truth motion (on registered meshes it is not usable yet: README; the tiny preset's 8-frame
-sequences are also too short for the temporal smoothing noisy meshes get).
+capture's ground-truth motion (on the demo preset's registered meshes it answers "none", 24 min: README; the
+tiny preset's 8-frame sequences are too short for the temporal smoothing noisy meshes may need).
 Each step is a regular `gg` command, so a re-run skips what is already finished. Writes <out>/reports/demo.json
 with the steps, their reports and timings.
 """

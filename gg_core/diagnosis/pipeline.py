@@ -281,10 +281,10 @@ def propose(sel: Selection, min_inclusion: float, max_trials: int) -> list[str]:
     less of the residual than a wrong one (measured: mass damping 0.057 vs strain-rate damping 0.125 on a capture
     with hidden air drag, yet 61 % vs 25 % held-out gain; a horizontal gravity tilt 4th of 6). Held-out
     rollouts decide. With noise even the sign can mislead: on a noisy capture with hidden air damping, mass
-    damping explained nothing of the smoothed residual and gained 64 % held-out. Measured and reverted: starting a
-    trial at its probe size where the regression put 0 (as reference trials do) named air damping s2 at 1.5 mm
-    noise right (-26 %), but also linear damping on `none` captures (bench s2 at 1.5 mm, -18 %; the tiny test
-    captures, -82 %)."""
+    damping explained nothing of the smoothed residual and gained 64 % held-out. Starting such a trial at its probe
+    size instead (as reference trials do) named air damping s2 at 1.5 mm noise right (-26 %), but also linear
+    damping on `none` captures (bench s2 at 1.5 mm, -18 %; the tiny test captures, -82 %): so both starts are
+    refitted and the training rollouts choose (_trial_from_starts)."""
     chosen = [n for n in sel.order if sel.inclusion[n] >= min_inclusion]
     others = sorted((n for n in sel.explained if n not in chosen), key=lambda n: -sel.explained[n])
     return (chosen + others)[:max_trials]
