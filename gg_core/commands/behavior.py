@@ -56,8 +56,7 @@ def run(args: argparse.Namespace) -> int:
     req = BehaviorRequest(capture=args.capture, project=args.project, train=args.train, heldout=args.heldout,
                           forces=forces, source=args.source,
                           noise_mm=args.noise_mm, attach_tol_mm=args.attach_tol_mm, sim_vertices=args.sim_vertices,
-                          fps=args.fps, substeps=args.substeps,
-                          seed=args.seed,
+                          fps=args.fps, substeps=args.substeps, seed=args.seed,
                           fit=FitConfig(global_iterations=args.global_iterations,
                                         local_iterations=args.local_iterations, **chosen,
                                         seed=args.seed, term_params=FitConfig.term_params if args.fit_term is None

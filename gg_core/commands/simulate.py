@@ -90,13 +90,16 @@ def run(args: argparse.Namespace) -> int:
     from ..storage import write_json
     from ..synth.anchoring import bind
 
-    if args.behavior is not None and not args.behavior.is_file():
-        raise InputError("no fitted behaviour file", args.behavior, "run gg behavior first, or fix the path")
+    fitted = None
+    if args.behavior is not None:
+        if not args.behavior.is_file():
+            raise InputError("no fitted behaviour file", args.behavior, "run gg behavior first, or fix the path")
+        with np.load(args.behavior) as z:
+            fitted = dict(z)
     if args.garment is not None:
         verts, faces = read_mesh(args.garment)
-    elif args.behavior is not None:
-        with np.load(args.behavior) as fitted:
-            verts, faces = fitted["template"], fitted["faces"]
+    elif fitted is not None:
+        verts, faces = fitted["template"], fitted["faces"]
     else:
         raise InputError("no garment to simulate", "--garment",
                          "pass --garment MESH or --behavior P/stage4/behavior.npz")
@@ -109,8 +112,7 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"unknown material value '{key}'", "--material", f"use one of {', '.join(MATERIAL_NAMES)}")
         values[key] = float(value)
     cloth = Cloth(verts, faces, material=Material.uniform(len(verts), **values))
-    if args.behavior:
-        fitted = np.load(args.behavior)
+    if fitted is not None:
         if len(fitted["template"]) != len(verts) or len(fitted["rest_lengths"]) != len(cloth.rest_lengths):
             raise InputError("fitted behaviour belongs to another garment mesh", args.behavior,
                              "simulate the garment the behaviour was fitted on (same vertices and faces)")

@@ -31,6 +31,15 @@ def isotropic_remesh(verts: np.ndarray, faces: np.ndarray, edge_length: float, i
     return v, f
 
 
+def remesh_open(verts: np.ndarray, faces: np.ndarray, edge_length: float, iterations: int = 10
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """An open mesh remeshed to edges of about `edge_length`: the border evened out first (tidy_border), as the
+    remesher keeps it fixed, and the slivers it then leaves next to the border collapsed after."""
+    verts, faces = tidy_border(verts, faces, edge_length)
+    verts, faces = isotropic_remesh(verts, faces, edge_length, iterations)
+    return collapse_short_edges(verts, faces, SLIVER_EDGE * edge_length)
+
+
 def coarsen(verts: np.ndarray, faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """An open or closed mesh remeshed to about `n_vertices` near-equilateral vertices on its own surface.
 
@@ -40,9 +49,7 @@ def coarsen(verts: np.ndarray, faces: np.ndarray, n_vertices: int) -> tuple[np.n
     area 0.528 -> 0.508 m^2)."""
     edge = edge_length_for(float(vertex_area(verts, faces).sum()), n_vertices)
     verts, faces = collapse_short_edges(verts, faces, COARSEN_COLLAPSE * edge)
-    verts, faces = tidy_border(verts, faces, edge)
-    verts, faces = isotropic_remesh(verts, faces, edge)
-    return collapse_short_edges(verts, faces, SLIVER_EDGE * edge)
+    return remesh_open(verts, faces, edge)
 
 
 def edge_lengths(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:

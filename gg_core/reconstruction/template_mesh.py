@@ -25,8 +25,8 @@ from .mask_vote import garment_vote
 from ..geometry.raycast import RayCaster
 from .mesh_graph import adjacency, face_components, genus, smooth, vertex_area, vertex_components
 from .photo_consistency import PhotoOptions, refine_along_normals
-from .remesh import SLIVER_EDGE, edge_length_for, isotropic_remesh
-from .surface_cut import collapse_short_edges, cut_at_level, main_pieces, tidy_border
+from .remesh import edge_length_for, isotropic_remesh, remesh_open
+from .surface_cut import cut_at_level, main_pieces
 from .visual_hull import Grid, Silhouette, hull_bounds
 
 COARSE_VOXEL = 0.02       # m: person search and garment box
@@ -139,9 +139,7 @@ def reconstruct_template(cameras: Sequence[Camera], foreground: Sequence[np.ndar
         occluder = RayCaster([(rv, rf), *occluders])
         gv, photo_log = refine_along_normals(gv, gf, cameras, images, occluder, footprint, opt.photo)
         lap("photo-consistency")
-    gv, gf = tidy_border(gv, gf, edge)
-    gv, gf = isotropic_remesh(gv, gf, edge, FINAL_REMESH_ITERATIONS)
-    gv, gf = collapse_short_edges(gv, gf, SLIVER_EDGE * edge)   # the remesher leaves inner vertices by the border
+    gv, gf = remesh_open(gv, gf, edge, FINAL_REMESH_ITERATIONS)
     lap("final remesh")
     labels = face_components(gf)
     log = {"timings_s": timings, "target_vertices": vertices, "voxel_m": voxel, "pixel_footprint_m": footprint,
