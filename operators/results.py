@@ -207,8 +207,23 @@ class GG_OT_show_residuals(_Loader):
                 raise InputError(f"activity map has {activity.shape} values for {len(verts)} vertices",
                                  project / "diagnose", "run Diagnose Physics again")
             _second_map(obj, np.maximum(-activity, 0.0), "stiffer_than_modelled")
+        for name, indices in region_groups(report).items():
+            if indices and max(indices) >= len(verts):
+                raise InputError(f"diagnosis region '{name}' names vertex {max(indices)} of {len(verts)}",
+                                 project / "reports" / "diagnose.json", "run Diagnose Physics again")
+            obj.vertex_groups.new(name=name).add(indices, 1.0, "REPLACE")
         scene.gg.diagnosis = summary(report)
         return scene.gg.diagnosis
+
+
+def region_groups(report: dict) -> dict[str, list[int]]:
+    """Vertex groups of the garment regions region candidates were tried on (select them in Edit Mode): the one
+    the maps singled out, and each scanned candidate's own."""
+    loc = report.get("localization", {})
+    groups = {"gg_region_maps": loc.get("region_vertices") or []}
+    groups.update({f"gg_region_{name}": scan.get("region_vertices") or []
+                   for name, scan in loc.get("scanned_regions", {}).items()})
+    return {name: [int(i) for i in indices] for name, indices in groups.items() if indices}
 
 
 def summary(report: dict) -> str:

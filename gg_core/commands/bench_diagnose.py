@@ -103,8 +103,24 @@ def parameter_error(truth: dict[str, object], values: dict[str, object] | None) 
     return None
 
 
+def region_overlap(report: dict, name: str | None, truth: np.ndarray | None) -> dict[str, float] | None:
+    """How well the region candidate `name` was placed: the share of its region on the true region (precision) and
+    of the true region it covers (recall); None unless both a region and the truth are there."""
+    if name is None or truth is None:
+        return None
+    loc = report["localization"]
+    scan = loc.get("scanned_regions", {}).get(name)
+    vertices = scan["region_vertices"] if scan is not None else loc.get("region_vertices")
+    if not vertices:
+        return None
+    found = np.zeros(len(truth), bool)
+    found[vertices] = True
+    true = truth > 0
+    return {"precision": float((found & true).sum() / found.sum()), "recall": float((found & true).sum() / true.sum())}
+
+
 def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, noise: float) -> dict:
-    from ..diagnosis.library import SYNTH_EFFECT_CLASS
+    from ..diagnosis.library import BY_NAME, SYNTH_EFFECT_CLASS
     from ..stages.diagnose import DiagnoseRequest, run_diagnose
     from ..synth.generate import SynthRequest, generate
 
@@ -151,6 +167,8 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         "parameter_error": parameter_error(true_params, accepted["refit"] if accepted and predicted == true_class
                                            else None),
         "true_effect_parameter_error": parameter_error(true_params, None if ref is None else ref["refit"]),
+        "region_overlap": region_overlap(report, accepted["name"] if accepted and BY_NAME[accepted["name"]].needs_region
+                                         else None, np.load(region_path) if region_path else None),
         "seconds": report["timings"]["total_s"],
     }
 

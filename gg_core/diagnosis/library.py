@@ -138,6 +138,7 @@ class Candidate:
     columns: Callable[[Context], np.ndarray]        # [K,N,V,3] force per unit coefficient
     model: Callable[[np.ndarray, Context], ModelChange]
     needs_region: bool = False
+    region_from: str = "map"    # "map": the localization's region (localize.py); "scan": its own (scan.py)
     plausibility: Callable[[dict[str, object], Cloth], str | None] | None = None
 
     def implausible(self, values: dict[str, object], cloth: Cloth) -> str | None:
@@ -294,6 +295,6 @@ CANDIDATES: tuple[Candidate, ...] = (
     Candidate("rest_length_region", "rest_length",
               "rest lengths changed on a region (tight seam, elastic band): static tension along a curve",
               ("rest_length_change",), "1", (-0.5, 0.5), _region_columns(("rest",)), _region_model(("rest",)),
-              needs_region=True),
+              needs_region=True, region_from="scan"),
 )
 BY_NAME: dict[str, Candidate] = {c.name: c for c in CANDIDATES}

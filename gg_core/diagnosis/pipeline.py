@@ -3,7 +3,7 @@ gg_core/stages/diagnose.py, handles files, resuming and outputs)."""
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -20,6 +20,7 @@ from .features import FEATURES, state_features
 from .library import BY_NAME, CANDIDATES, Candidate, Context
 from .localize import Localization, activity_map, localize
 from .residuals import FrameBatch, Pooling, build_frames, make_pooling, nuisance_changes, residual, responses
+from .scan import ScanResult, scan_region
 from .selection import Design, Selection, fit, gram, select
 
 if TYPE_CHECKING:
@@ -53,6 +54,11 @@ class Result:
     progress: Progress
     reference: dict[str, Trial] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+    scans: dict[str, ScanResult] = field(default_factory=dict)   # region candidates that found their own region
+
+    def region_of(self, name: str) -> np.ndarray | None:
+        """The region candidate `name` acted on: its scan's, or the localization's."""
+        return self.scans[name].region if name in self.scans else self.localization.region
 
     @property
     def heldout_before(self) -> float:
@@ -92,8 +98,8 @@ class Result:
                                                   for k, c in enumerate(cand.coefficients)}},
                 "evidence": {"explained": sel.explained[n], "selected": n in order,
                              "where": self.localization.vertex_feature[0], "when": self.localization.step_feature[0],
-                             "region_vertices": int(self.localization.region.sum())
-                             if cand.needs_region and self.localization.region is not None else None},
+                             "region_vertices": int(self.region_of(n).sum())
+                             if cand.needs_region and self.region_of(n) is not None else None},
                 "refit_start": None if t is None else t.start,
                 "heldout_l2": None if t is None else t.heldout_l2,
                 "heldout_gain": None if t is None else self.gain(t),
@@ -123,7 +129,12 @@ class Result:
                              "vertex_map_median": float(np.median(loc.vertex_map[loc.vertex_map > 0])),
                              "region_vertices": None if loc.region is None else np.flatnonzero(loc.region).tolist(),
                              "region_source": loc.region_source,
-                             "activity_z_range": [float(loc.activity_map.min()), float(loc.activity_map.max())]},
+                             "activity_z_range": [float(loc.activity_map.min()), float(loc.activity_map.max())],
+                             "scanned_regions": {n: {"region_vertices": None if r.region is None
+                                                     else np.flatnonzero(r.region).tolist(),
+                                                     "patches": r.patches, "explained": r.explained,
+                                                     "best_patch_explained": float(r.patch_explained.max())}
+                                                 for n, r in self.scans.items()}},
             "train_rollout_l2_before": self.null.train_l2,
             "reference_trials": {n: {"heldout_l2": t.heldout_l2, "heldout_gain": self.gain(t),
                                      "train_rollout_gain": self.train_gain(t), "refit": t.values}
@@ -209,7 +220,11 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
 
     t0 = time.perf_counter()
     ctx = Context.build(sim, batch, loc.region)
-    blocks = _candidate_rows(ctx, pooling, predicted, req.probe_acceleration)
+    scans = {c.name: scan_region(c, ctx, pooling, predicted, y, n_cols, req.probe_acceleration, req.min_explained)
+             for c in CANDIDATES if c.region_from == "scan"}
+    contexts = {c.name: replace(ctx, region=scans[c.name].region) if c.name in scans else ctx for c in CANDIDATES}
+    progress.step("region scan")
+    blocks = _candidate_rows(contexts, pooling, predicted, req.probe_acceleration)
     progress.step("candidate responses")
     design = Design(y, n_cols, blocks, pooling.groups())
     sel = select(design, BY_NAME, req.min_explained, req.bootstrap, req.seed)
@@ -226,8 +241,8 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     proposed = propose(sel, req.min_inclusion, req.max_trials)
     trials = {}
     for n in proposed:
-        trials[n] = _trial_from_starts(BY_NAME[n], sel.alone[n], sim, ctx, train, heldout, attached, refit_config,
-                                       req.probe_acceleration)
+        trials[n] = _trial_from_starts(BY_NAME[n], sel.alone[n], sim, contexts[n], train, heldout, attached,
+                                       refit_config, req.probe_acceleration)
         progress.step(f"trial {n}: held-out L2 {before * 1e3:.1f} -> {trials[n].heldout_l2 * 1e3:.1f} mm")
     unphysical = {n: why for n in proposed if (why := implausible(trials[n], sim.cloth))}
     passing = sorted((n for n in proposed
@@ -235,10 +250,13 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
                       and n not in unphysical),
                      key=lambda n: trials[n].heldout_l2)
     accepted, after = passing[:1], (trials[passing[0]].heldout_l2 if passing else before)
-    if len(passing) > 1 and BY_NAME[passing[0]].equivalence != BY_NAME[passing[1]].equivalence:
+    pair_regions = [contexts[n].region for n in passing[:2] if BY_NAME[n].needs_region]
+    if len(passing) > 1 and BY_NAME[passing[0]].equivalence != BY_NAME[passing[1]].equivalence and \
+            len(pair_regions) < 2:       # two region fields on two different regions: one trial cannot hold both
         pair = fit(gram(design), passing[:2], BY_NAME).coefs
-        joint = trial(sim, BASELINE_FIT, [(BY_NAME[n], pair[n]) for n in passing[:2]], ctx, loc.region, train,
-                      heldout, attached, refit_config)
+        region = pair_regions[0] if pair_regions else None
+        joint = trial(sim, BASELINE_FIT, [(BY_NAME[n], pair[n]) for n in passing[:2]], replace(ctx, region=region),
+                      region, train, heldout, attached, refit_config)
         joint_name = "+".join(passing[:2])
         trials[joint_name] = joint
         if why := implausible(joint, sim.cloth):
@@ -260,7 +278,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     baseline["internal_damping_loss_factor"] = 2.0 * np.pi * baseline["viscoelastic_damping.tau"]   # at 1 Hz
     baseline.update(starts)
     return Result(loc, sel, trials, accepted, null, after, baseline, dict(zip(labels, adjust.tolist())), batch,
-                  unphysical, progress, reference, timings)
+                  unphysical, progress, reference, timings, scans)
 
 
 def confirmed(t: Trial, reference: Trial, min_gain: float, min_gain_mm: float) -> bool:
@@ -318,12 +336,13 @@ def _trial_from_starts(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulato
     return probed if probed.train_l2 < start.train_l2 else start
 
 
-def _candidate_rows(ctx: Context, pooling: Pooling, predicted: np.ndarray, acceleration: float
+def _candidate_rows(contexts: dict[str, Context], pooling: Pooling, predicted: np.ndarray, acceleration: float
                     ) -> dict[str, np.ndarray]:
-    """Pooled response columns [R,K] of every candidate that acts on these data (region candidates need a
-    region; a candidate whose force vanishes here, e.g. friction without contact, is left out)."""
+    """Pooled response columns [R,K] of every candidate that acts on these data, each in its own context (region
+    candidates need a region; a candidate whose force vanishes here, e.g. friction without contact, is left out)."""
     blocks = {}
     for cand in CANDIDATES:
+        ctx = contexts[cand.name]
         if cand.needs_region and ctx.region is None:
             continue
         probes = cand.probes(ctx, acceleration)

@@ -177,12 +177,20 @@ td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc
 def _region_sentence(loc: dict) -> str:
     """Which garment region the region candidates were tried on, and what singled it out."""
     region = loc.get("region_vertices")
-    if not region:
-        return "No garment region stood out: region candidates were not tried."
     why = {"deformation activity": "it stretches differently over the motion than the baseline's own rollouts "
                                    "(deformation activity)",
            "residual": "its residual stands out"}.get(loc.get("region_source", ""), "it stands out")
-    return f"Region candidates act on {len(region)} vertices, singled out because {why}."
+    out = [f"Region candidates act on {len(region)} vertices, singled out because {why}." if region else
+           "No garment region stood out in the maps: region candidates that use them were not tried."]
+    for name, scan in loc.get("scanned_regions", {}).items():
+        if scan["region_vertices"]:
+            out.append(f"{name} scanned the garment patch by patch and acts on {len(scan['region_vertices'])} "
+                       f"vertices ({len(scan['patches'])} patches), where one change explains "
+                       f"{100 * scan['explained']:.1f} % of the residual.")
+        else:
+            out.append(f"{name} scanned the garment patch by patch: no patch explains enough of the residual "
+                       f"(best {100 * scan['best_patch_explained']:.1f} %), so it was not tried.")
+    return " ".join(out)
 
 
 def _baseline_paragraph(baseline: dict) -> str:

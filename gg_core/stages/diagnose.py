@@ -9,7 +9,8 @@ it through the force library, refit, and show the held-out rollout error before 
 2. Residual: the one-frame position error of the simulator's own step on the training sequences, pooled in the
    weak form, after re-adjusting the global parameters to it (gg_core/diagnosis/residuals.py).
 3. Localization: per-vertex map, per-frame curve, their best-correlated state features, the standout region
-   (first from the deformation activity: where the cloth stretches less than the baseline's own rollouts say).
+   (first from the deformation activity: where the cloth stretches less than the baseline's own rollouts say);
+   a rest-length region, which no map shows, is scanned for patch by patch (gg_core/diagnosis/scan.py).
 4. Selection: forward sparse regression on the candidate library with a moving-block bootstrap.
 5. Confirmation: the selected candidates, then the others by the share of the residual they explain, up to
    `max_trials`, are each added to the simulator and refitted; the best is accepted only if the held-out
@@ -161,7 +162,7 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     attached = attached_vertices(train, body_faces, (req.attach_tol_mm + 4 * noise_mm) * 1e-3)
     reference_region = np.load(req.reference_region) if req.reference_region else None
     result = diagnose(req, train, heldout, faces, body_faces, attached, hand_mask(train[0].body.shape[1]),
-                      reference_region, Progress(STAGE, 9 + req.max_trials + len(req.reference), req.progress))
+                      reference_region, Progress(STAGE, 10 + req.max_trials + len(req.reference), req.progress))
 
     out = project / "diagnose"
     for name, values in (("residual_vertex", result.localization.vertex_map),

@@ -134,6 +134,29 @@ def test_activity_map_is_a_second_attribute_with_the_residual_still_shown(blende
     assert obj["gg_stiffer_than_modelled_max"] > 0
 
 
+def test_tried_regions_become_vertex_groups(blender, tmp_path):
+    report = {"verdict": "none", "localization": {
+        "region_vertices": [0, 1], "scanned_regions": {"rest_length_region": {"region_vertices": [2, 3]},
+                                                       "heavy_region": {"region_vertices": None}}}}
+    _write_diagnosis(tmp_path, report, np.zeros(4))
+    blender.context.scene.gg.project_path = str(tmp_path)
+    assert blender.ops.gg.show_residuals() == {"FINISHED"}
+    obj = blender.data.objects["diagnosis_residual"]
+    assert sorted(g.name for g in obj.vertex_groups) == ["gg_region_maps", "gg_region_rest_length_region"]
+    group = obj.vertex_groups["gg_region_rest_length_region"].index
+    members = [v.index for v in obj.data.vertices if any(g.group == group for g in v.groups)]
+    assert members == [2, 3]
+
+
+def test_region_beyond_the_mesh_is_refused(blender, tmp_path):
+    report = {"verdict": "none", "localization": {"scanned_regions": {"rest_length_region": {"region_vertices": [9]}}}}
+    _write_diagnosis(tmp_path, report, np.zeros(4))
+    blender.context.scene.gg.project_path = str(tmp_path)
+    with pytest.raises(RuntimeError,
+                       match=r"gg: error: diagnosis region 'gg_region_rest_length_region' names vertex 9 of 4"):
+        blender.ops.gg.show_residuals()
+
+
 def test_residual_map_of_wrong_length_is_refused(blender, tmp_path):
     _write_diagnosis(tmp_path, {"verdict": "none"}, np.zeros(3))
     blender.context.scene.gg.project_path = str(tmp_path)

@@ -15,8 +15,8 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
 from diagnosis_helpers import write_sim_capture  # noqa: E402
 
 from gg_core.cli import main  # noqa: E402
-from gg_core.commands.bench_diagnose import (confusion, effect_params, parameter_error, summarize,  # noqa: E402
-                                             truth_parameters)
+from gg_core.commands.bench_diagnose import (confusion, effect_params, parameter_error, region_overlap,  # noqa: E402
+                                             summarize, truth_parameters)
 
 
 def test_diagnose_refuses_a_missing_capture_with_one_line(tmp_path, capsys):
@@ -66,3 +66,12 @@ def test_bench_scoring():
     assert table[0].split()[-3:] == ["gravity", "none", "wind"]
     assert [int(v) for v in table[-1].split()[1:]] == [1, 0, 0]      # wind named gravity
     assert np.isfinite(summary["mean_heldout_gain_when_named"])
+
+
+def test_region_overlap_scores_where_a_region_effect_was_placed():
+    truth = np.array([1.0, 1.0, 1.0, 1.0, 0.0, 0.0])
+    report = {"localization": {"region_vertices": [4, 5],
+                               "scanned_regions": {"rest_length_region": {"region_vertices": [2, 3, 4]}}}}
+    assert region_overlap(report, "rest_length_region", truth) == pytest.approx({"precision": 2 / 3, "recall": 0.5})
+    assert region_overlap(report, "region_stiffness", truth) == {"precision": 0.0, "recall": 0.0}   # the maps'
+    assert region_overlap(report, None, truth) is None and region_overlap(report, "region_stiffness", None) is None
