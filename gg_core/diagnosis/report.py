@@ -161,7 +161,7 @@ td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc
 {html.escape(loc['vertex_feature']['meaning'] or loc['vertex_feature']['name'])}, Spearman
 {loc['vertex_feature']['spearman']:.2f}).</p>
 <img src="{front}" alt="front"> <img src="{back}" alt="back"><br><img src="{bar}" alt="colour scale">
-<p>{html.escape(_region_sentence(loc))}</p>
+<p>{html.escape(region_sentence(loc))}</p>
 <h2>When: residual over time</h2>
 <p>Best-correlated state: {html.escape(loc['step_feature']['meaning'] or loc['step_feature']['name'])}, Spearman
 {loc['step_feature']['spearman']:.2f}.</p><img src="{plot}" alt="residual over time">
@@ -174,7 +174,7 @@ td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc
     return Path(path)
 
 
-def _region_sentence(loc: dict) -> str:
+def region_sentence(loc: dict) -> str:
     """Which garment region the region candidates were tried on, and what singled it out."""
     region = loc.get("region_vertices")
     why = {"deformation activity": "it stretches differently over the motion than the baseline's own rollouts "

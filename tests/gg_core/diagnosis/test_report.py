@@ -9,7 +9,7 @@ import numpy as np
 from PIL import Image
 from physics_helpers import sheet
 
-from gg_core.diagnosis.report import plot_curves, render_mesh, sentence, write_html
+from gg_core.diagnosis.report import region_sentence, plot_curves, render_mesh, sentence, write_html
 
 EFFECT = {"name": "gravity_offset", "class": "gravity", "description": "tilted gravity", "unit": "m/s^2",
           "params": {"delta_g_x": 2.0, "delta_g_z": 0.0},
@@ -50,3 +50,18 @@ def test_sentence_and_page(tmp_path):
     images = re.findall(r'src="data:image/png;base64,([^"]+)"', page)
     assert len(images) == 4
     assert Image.open(io.BytesIO(base64.b64decode(images[0]))).size == (300, 400)
+
+
+def testregion_sentence_says_where_each_region_candidate_acted():
+    scanned = {"rest_length_region": {"region_vertices": [1, 2, 3], "patches": [4, 7], "explained": 0.123,
+                                      "best_patch_explained": 0.1},
+               "heavy_region": {"region_vertices": None, "patches": [], "explained": 0.01,
+                                "best_patch_explained": 0.01}}
+    text = region_sentence({"region_vertices": [5, 6], "region_source": "deformation activity",
+                             "scanned_regions": scanned})
+    assert text.startswith("Region candidates act on 2 vertices, singled out because it stretches differently")
+    assert "rest_length_region scanned the garment patch by patch and acts on 3 vertices (2 patches)" in text
+    assert "12.3 % of the residual" in text
+    assert "heavy_region scanned the garment patch by patch: no patch explains enough of the residual (best 1.0 %)" \
+        in text
+    assert region_sentence({}).startswith("No garment region stood out in the maps")
