@@ -84,16 +84,16 @@ def scan_region(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.n
     """The region of `cand` (a region candidate) from its response on each pooling patch; `y` and `nuisance` are
     the pooled residual rows and nuisance columns of the selection, `predicted` the unchanged one-frame
     prediction."""
-    columns = []
+    columns_arr = np.zeros((pooling.n_patches, len(y), len(cand.coefficients)))
     for p in range(pooling.n_patches):
-        on_patch = replace(ctx, region=(pooling.patch == p).astype(np.float64))
-        columns.append(pooling.rows(responses(ctx.sim, ctx.batch, predicted, cand.probes(on_patch, acceleration))).T)
-    columns_arr = np.stack(columns)
+        probes = cand.probes(replace(ctx, region=(pooling.patch == p).astype(np.float64)), acceleration)
+        if all(size > 0 for size, _ in probes):     # else the change does nothing on this patch
+            rows = pooling.rows(responses(ctx.sim, ctx.batch, predicted, probes)).T
+            if np.isfinite(rows).all():             # a patch whose probe step failed to solve explains nothing
+                columns_arr[p] = rows
     free = pooling.patch >= 0
     sizes = np.bincount(pooling.patch[free], minlength=pooling.n_patches)
     max_patches = max(1, int(REGION_MAX_FRACTION * free.sum() / max(sizes.mean(), 1.0)))
-    usable = np.isfinite(columns_arr).all(axis=(1, 2))
-    columns_arr[~usable] = 0.0          # a patch whose probe step failed to solve explains nothing
     chosen, share, alone = grow(cand, y, nuisance, columns_arr, pooling.groups(),
                                 patch_adjacency(pooling.patch, ctx.sim.num.edges), max_patches, min_share)
     region = np.isin(pooling.patch, chosen).astype(np.float64) if chosen else None
