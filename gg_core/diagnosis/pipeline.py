@@ -251,8 +251,8 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
                      key=lambda n: trials[n].heldout_l2)
     accepted, after = passing[:1], (trials[passing[0]].heldout_l2 if passing else before)
     pair_regions = [contexts[n].region for n in passing[:2] if BY_NAME[n].needs_region]
-    if len(passing) > 1 and BY_NAME[passing[0]].equivalence != BY_NAME[passing[1]].equivalence and \
-            len(pair_regions) < 2:       # two region fields on two different regions: one trial cannot hold both
+    one_region = len(pair_regions) < 2 or np.array_equal(*pair_regions)   # one trial holds one region
+    if len(passing) > 1 and BY_NAME[passing[0]].equivalence != BY_NAME[passing[1]].equivalence and one_region:
         pair = fit(gram(design), passing[:2], BY_NAME).coefs
         region = pair_regions[0] if pair_regions else None
         joint = trial(sim, BASELINE_FIT, [(BY_NAME[n], pair[n]) for n in passing[:2]], replace(ctx, region=region),
