@@ -208,7 +208,7 @@ class GG_OT_show_residuals(_Loader):
                                  project / "diagnose", "run Diagnose Physics again")
             _second_map(obj, np.maximum(-activity, 0.0), "stiffer_than_modelled")
         for name, indices in region_groups(report).items():
-            if indices and max(indices) >= len(verts):
+            if max(indices) >= len(verts):      # region_groups keeps non-empty regions only
                 raise InputError(f"diagnosis region '{name}' names vertex {max(indices)} of {len(verts)}",
                                  project / "reports" / "diagnose.json", "run Diagnose Physics again")
             obj.vertex_groups.new(name=name).add(indices, 1.0, "REPLACE")

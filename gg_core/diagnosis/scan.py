@@ -58,9 +58,10 @@ def patch_adjacency(patch: np.ndarray, edges: np.ndarray) -> list[set[int]]:
     return out
 
 
-def _share(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarray, groups: np.ndarray) -> float:
+def _share(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarray, groups: np.ndarray,
+           base: float) -> float:
+    """Share of the nuisance-only residual sum of squares `base` that `columns` remove next to the nuisance."""
     g = gram(Design(y, nuisance, {cand.name: columns}, groups))
-    base = fit(g, [], {cand.name: cand}).rss
     return 0.0 if base <= 0 else 1.0 - fit(g, [cand.name], {cand.name: cand}).rss / base
 
 
@@ -68,7 +69,8 @@ def grow(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarr
          neighbours: list[set[int]], max_patches: int, min_share: float) -> tuple[list[int], float, np.ndarray]:
     """Patches of the region and its explained share from per-patch response rows `columns` [P,R,K] (a change on
     a union of patches responds as the sum of their rows: the responses are linear in the change)."""
-    alone = np.array([_share(cand, y, nuisance, c, groups) for c in columns])
+    base = fit(gram(Design(y, nuisance, {}, groups)), [], {}).rss
+    alone = np.array([_share(cand, y, nuisance, c, groups, base) for c in columns])
     best = int(np.argmax(alone))
     chosen, share = [best], float(alone[best])
     if share < min_share:
@@ -78,7 +80,7 @@ def grow(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarr
         border = set().union(*(neighbours[p] for p in chosen)) - set(chosen)
         if not border:
             break
-        tries = {q: _share(cand, y, nuisance, total + columns[q], groups) for q in border}
+        tries = {q: _share(cand, y, nuisance, total + columns[q], groups, base) for q in border}
         q = max(tries, key=tries.get)
         if tries[q] < share + GROWTH_SHARE:
             break
