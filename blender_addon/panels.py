@@ -10,12 +10,17 @@ import bpy
 from bpy.types import Context, Panel
 
 
-class GG_PT_garments(Panel):
-    bl_idname = "GG_PT_garments"
-    bl_label = "Gaussian Garments"
+class _Sidebar:
+    """Where every panel of the add-on lives: the 3D View sidebar's "Garments" tab."""
+
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = "Garments"
+
+
+class GG_PT_garments(_Sidebar, Panel):
+    bl_idname = "GG_PT_garments"
+    bl_label = "Gaussian Garments"
 
     def draw(self, context: Context) -> None:
         settings = context.scene.gg
@@ -35,13 +40,10 @@ class GG_PT_garments(Panel):
             layout.operator("gg.use_capture_camera", icon="VIEW_CAMERA")
 
 
-class GG_PT_stages(Panel):
+class GG_PT_stages(_Sidebar, Panel):
     bl_idname = "GG_PT_stages"
     bl_label = "Pipeline"
     bl_parent_id = GG_PT_garments.bl_idname
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Garments"
 
     def draw(self, context: Context) -> None:
         settings = context.scene.gg
@@ -61,13 +63,10 @@ class GG_PT_stages(Panel):
             layout.label(text=settings.diagnosis, icon="INFO")
 
 
-class GG_PT_job(Panel):
+class GG_PT_job(_Sidebar, Panel):
     bl_idname = "GG_PT_job"
     bl_label = "Job"
     bl_parent_id = GG_PT_garments.bl_idname
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "Garments"
 
     def draw(self, context: Context) -> None:
         job = context.window_manager.gg_job

@@ -68,8 +68,11 @@ def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
     air_drag: Blender's cloth solver applies -0.01 air_damping v per vertex with time in frames and its per-vertex
     mass, i.e. mass damping alpha = 0.01 air_damping fps / vertex_mass (1/s); the diagnosis estimates the total
     (the baseline's default 1/s included). stiff_patch: Blender scales its spring
-    stiffnesses, ours the StVK Lame parameters: comparable only approximately. Wind strength and Blender's
-    friction coefficient have no counterpart in our units and are not scored."""
+    stiffnesses, ours the StVK Lame parameters: comparable only approximately. friction: Blender's collision
+    response (collision.cc) takes min(0.01 friction v_n, |v_t|) off the tangential velocity where it stops the
+    normal approach v_n, i.e. Coulomb mu = 0.01 friction against the collision impulse; ours acts against the
+    lagged penalty force, so this too is approximate (the diagnosis baseline's friction is zero: the estimate is the
+    total). Wind strength has no counterpart in our units and is not scored."""
     effect, params = truth["effect"]["name"], truth["effect"]["params"]
     if effect == "air_drag":
         cloth = truth["material"]["blender_cloth"]
@@ -78,6 +81,8 @@ def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
     if effect == "gravity":
         g = np.array(truth["material"]["gravity"])
         return {"gravity_offset.delta_g": [float(g[0]), float(g[2])]}          # horizontal part (the tilt)
+    if effect == "friction":
+        return {"body_friction.mu": 0.01 * float(params["friction"])}
     if effect == "shrink":
         return {"region.rest_scale": 1.0 - float(params["factor"])}
     if effect == "stiff_patch":

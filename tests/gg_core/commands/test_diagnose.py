@@ -51,6 +51,9 @@ def test_bench_scoring():
                              "material": {"blender_cloth": {"mass": 0.3}}, "preset": {"fps": 30}})
     assert drag == {"mass_damping.alpha": pytest.approx(10.0)}
     assert parameter_error(drag, {"mass_damping.alpha": 11.0}) == pytest.approx(0.1)
+    friction = truth_parameters({"effect": {"name": "friction", "params": {"friction": 60.0}}})
+    assert friction == {"body_friction.mu": pytest.approx(0.6)}
+    assert parameter_error(friction, {"body_friction.mu": 0.3}) == pytest.approx(0.5)
     cases = [{"true_class": "none", "predicted": "none", "correct": True, "heldout_gain": 0.0, "gap_closed": None,
               "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": None},
              {"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
