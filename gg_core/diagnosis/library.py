@@ -265,7 +265,7 @@ CANDIDATES: tuple[Candidate, ...] = (
               _term_columns("mass_damping", [{"alpha": 1.0}]), _added_term("mass_damping", "alpha"),
               plausibility=_linear_damping),
     Candidate("body_friction", "friction",
-              "Coulomb friction -mu N t against the body (the baseline has none): shoulders, waist, hips while sliding",
+              "extra Coulomb friction -mu N t against the body: shoulders, waist and hips while sliding",
               ("mu",), "1", (0.0, np.inf),
               _term_columns("body_friction", [{"mu": 1.0}]), _added_term("body_friction", "mu")),
     Candidate("anisotropic_stretch", "anisotropy",
