@@ -15,6 +15,12 @@ _PAIR_CHUNK = 2_000_000   # point-triangle pairs evaluated per numpy batch (boun
 
 def sample_surface(verts: np.ndarray, faces: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     """[n, 3] points uniformly distributed over the mesh area (faces picked by area, uniform barycentrics)."""
+    return sample_faces(verts, faces, n, rng)[0]
+
+
+def sample_faces(verts: np.ndarray, faces: np.ndarray, n: int, rng: np.random.Generator
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """([n, 3] area-uniform points, [n] the face each lies on)."""
     tri = np.asarray(verts, np.float64)[np.asarray(faces, np.int64)]
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     if len(tri) == 0 or area.sum() <= 0:
@@ -22,7 +28,7 @@ def sample_surface(verts: np.ndarray, faces: np.ndarray, n: int, rng: np.random.
     face = rng.choice(len(tri), size=n, p=area / area.sum())
     r1, r2 = np.sqrt(rng.random(n)), rng.random(n)
     w = np.stack([1 - r1, r1 * (1 - r2), r1 * r2], axis=1)
-    return np.einsum("nk,nkd->nd", w, tri[face])
+    return np.einsum("nk,nkd->nd", w, tri[face]), face
 
 
 def point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:

@@ -125,6 +125,7 @@ def run_template(req: TemplateRequest) -> Path:
     # heavy imports (torch, numba kernels) only once the input is known to be good: bad input fails fast
     from ..gaussians import build_texture
     from ..gaussians.texture import uv_atlas
+    from ..metrics.coverage import stereo_coverage
     from ..metrics.surface import surface_metrics
     from ..reconstruction.photo_consistency import PhotoOptions
     from ..reconstruction.template_mesh import GEOMETRY_STEPS, TemplateGeometryOptions, reconstruct_template
@@ -181,6 +182,8 @@ def run_template(req: TemplateRequest) -> Path:
         t = time.perf_counter()
         gt_verts, gt_faces = read_mesh(gt_path)
         metrics = surface_metrics(verts, faces, gt_verts, gt_faces)
+        # what any multi-view method could triangulate of the truth (a ceiling on the recall, metrics/coverage.py)
+        metrics["truth_stereo_coverage"] = stereo_coverage(gt_verts, gt_faces, [v.camera for v in views], [body])
         timings["metrics_s"] = time.perf_counter() - t
     timings["total_s"] = time.perf_counter() - start
     payload = {

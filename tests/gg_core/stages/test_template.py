@@ -40,6 +40,10 @@ def test_template_outputs_and_accuracy(template_project):
     gt = read_mesh(Capture(req.capture).sequence("00_walk").gt_garment_files["000000"])
     assert surface_metrics(verts, faces, *gt)["cd_cm"] == pytest.approx(report["cd_cm"], rel=1e-3)  # OBJ: 7 digits
     assert report["sequence"] == "00_walk" and report["frame"] == "000000" and len(report["cameras"]) == 6
+    # the truth's stereo coverage: fewer cameras within tighter facing angles, so the shares can only grow
+    cov = [report["truth_stereo_coverage"][f"cos_{c}"] for c in ("0.1", "0.3", "0.5")]
+    assert all(0.0 <= c["unseen_pct"] <= c["fewer_than_two_pct"] < 50.0 for c in cov)
+    assert cov[0]["fewer_than_two_pct"] <= cov[1]["fewer_than_two_pct"] <= cov[2]["fewer_than_two_pct"]
     # UV atlas: every face has UVs inside the unit square, and no UV triangle is degenerate
     assert uvs is not None and face_uvs.shape == faces.shape
     assert uvs.min() >= 0.0 and uvs.max() <= 1.0
