@@ -39,6 +39,26 @@ def test_sweep_scores_peak_at_the_true_depth():
     assert np.all(scores.max(axis=1) > 0.9)
 
 
+def test_best_camera_pairs_ignore_a_camera_that_sees_something_else():
+    # camera 0's view of the plane is blocked by something the visibility test does not know (a fold's ridge):
+    # its image is unrelated texture. All pairs dilute the peak with its 4 pairs; the better half of the 10 pairs
+    # are pairs of the 4 cameras that agree.
+    cams = _cameras()
+    images = [plane_image(c) for c in cams]
+    images[0] = np.random.default_rng(0).random(images[0].shape)
+    verts, faces = _plane(5, 0.1, 0.0)
+    normals = np.tile([0.0, 0.0, 1.0], (len(verts), 1))
+    offsets = np.linspace(-0.03, 0.03, 13)
+    seen = np.ones((len(cams), len(verts)), bool)
+    mean_all = sweep_scores(verts + 0.02 * normals, normals, offsets, seen, cams, images, 0.005, 5, 1.0)
+    best_half = sweep_scores(verts + 0.02 * normals, normals, offsets, seen, cams, images, 0.005, 5, 0.5)
+    np.testing.assert_allclose(offsets[np.argmax(best_half, axis=1)], -0.02)
+    assert np.all(best_half.max(axis=1) > 0.9) and np.all(mean_all.max(axis=1) < 0.75)
+    # a vertex seen by one camera has no pair to score it
+    seen[1:, 0] = False
+    assert np.isnan(sweep_scores(verts, normals, offsets, seen, cams, images, 0.005, 5, 0.5)[0]).all()
+
+
 def test_refinement_moves_an_offset_plane_back_onto_the_textured_plane():
     cams = _cameras()
     images = [plane_image(c) for c in cams]
