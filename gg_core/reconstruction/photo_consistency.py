@@ -40,11 +40,20 @@ grazing cameras (cosine 0.3 / 0.4) still lose (86.8 / 85.9 %, 87.6 / 86.8 %). Th
 softer offset field (stiffness 4 -> 2): 0.500 -> 0.484 cm / 88.0 -> 88.9 % and 0.497 -> 0.484 cm / 87.4 -> 88.0 %
 on those two captures; on a capture of seed 5 not used to choose either change, all pairs at stiffness 4 -> the
 better half -> stiffness 2: 0.553 -> 0.521 -> 0.515 cm, 84.9 -> 86.8 -> 87.2 % (stiffness 1 / 0.5: 88.4 / 87.6 %
-and 88.4 / 88.6 % on the first two, with more neighbour aggregation 88.6 / 88.5 %). What no matching can reach: on that
+and 88.4 / 88.6 % on the first two, with more neighbour aggregation 88.6 / 88.5 %).
+Then (same day) each colour channel centred on its own mean instead of one mean over all three, and the patch
+weighted by a Gaussian of one sample: with one mean, a coloured fabric's constant channel differences (blue cloth:
+B above R everywhere) correlate at every depth and flatten the score curve. Template CD / F@1cm on the two
+captures 0.484 -> 0.441 cm / 88.9 -> 91.0 % and 0.484 -> 0.442 cm / 88.0 -> 90.7 % (per-channel means alone 90.6 /
+90.1 %); on the seed-5 capture, not used for choosing, 0.515 -> 0.427 cm / 87.2 -> 91.6 % (p2m 0.358 cm), and all
+camera pairs instead of the better half there 90.9 %. Retuned on the two captures and not kept: stiffness 1 / 4
+(91.0 / 91.0 %, 89.7 / 89.6 %), cosine 0.3 (91.2 / 91.3 %, but 91.5 % on seed 5), a 7-sample patch with sigma 1.5
+(90.8 / 90.3 %), samples 0.75 pixels apart (90.7 / 90.1 %). What no matching can reach: on that
 frame 4.1 / 5.4 / 8.0 % of the true skirt is seen by fewer than two cameras within 84 / 73 / 60 degrees
-(metrics/coverage.py), but of the 15.8 % of true points the template misses by more than 1 cm (17.0 % with all
-pairs), 11.3 % (12.4 %) are seen by at least two cameras within 60 degrees: the matching, not visibility, still
-bounds this step.
+(metrics/coverage.py), but of the 12.3 % of true points the template misses by more than 1 cm (17.0 % with all
+pairs and one mean), 8.0 % (12.4 %) are seen by at least two cameras within 60 degrees: the matching, not
+visibility, still bounds this step. By height (lowest fifth first) the misses are 29.6 / 16.5 / 10.4 / 5.1 / 0.2 %
+of the true points (were 37.5 / 23.1 / 17.1 / 6.4 / 1.1 %); the hem stays 1.1 cm high (was 1.6 cm), see below.
 
 The hem: the vote cuts the hull where the masks put the hem (demo capture, 00_walk frame 0, without this step:
 mean hem height 0.553 m, truth 0.554 m), but this step raises it to 0.568 m, because a flared skirt's normals tilt
@@ -75,7 +84,8 @@ class PhotoOptions:
     search_in: float = 0.06      # m searched inwards (the hull over-estimates) ...
     search_out: float = 0.01     # ... and outwards (mask and voxel errors)
     patch: int = 5               # patch side in samples ...
-    patch_spacing: float = 1.0   # ... this many pixel footprints apart
+    patch_spacing: float = 1.0   # ... this many pixel footprints apart ...
+    patch_sigma: float | None = 1.0   # ... weighted by a Gaussian of this many samples (None: evenly)
     min_cosine: float = 0.5      # only cameras facing the vertex within 60 degrees vote
     aggregate: int = 2           # neighbour-averaging iterations on the score curves
     min_score: float = 0.2       # aggregated NCC below this: the vertex has no say in the fit
@@ -111,12 +121,17 @@ def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def sweep_scores(verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, seen: np.ndarray,
                  cameras: Sequence[Camera], images: Sequence[np.ndarray], spacing: float, patch: int,
-                 pair_share: float = 1.0) -> np.ndarray:
+                 pair_share: float = 1.0, sigma: float | None = None) -> np.ndarray:
     """[V, D] NCC of the patch at verts + offset * normal: at each depth the mean over the best `pair_share` of
-    the pairs of seeing cameras (1.0: all pairs; NaN when fewer than two cameras see the vertex)."""
+    the pairs of seeing cameras (1.0: all pairs; NaN when fewer than two cameras see the vertex). Each colour
+    channel is centred on its own (weighted) mean; `sigma` (in samples) weights the patch by a Gaussian around
+    its centre, None weighs it evenly."""
     t1, t2 = tangent_frames(normals)
-    grid = (np.arange(patch) - (patch - 1) / 2) * spacing
-    a, b = [g.ravel() for g in np.meshgrid(grid, grid, indexing="ij")]
+    steps = np.arange(patch) - (patch - 1) / 2
+    a, b = [g.ravel() * spacing for g in np.meshgrid(steps, steps, indexing="ij")]
+    r2 = np.add.outer(steps ** 2, steps ** 2).ravel()
+    weight = np.ones(patch * patch) if sigma is None else np.exp(-0.5 * r2 / sigma ** 2)
+    weight /= weight.sum()
     scores = np.full((len(verts), len(offsets)), np.nan)
     for s in range(0, len(verts), _VERTEX_CHUNK):
         sl = slice(s, s + _VERTEX_CHUNK)
@@ -131,8 +146,9 @@ def sweep_scores(verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, se
             if len(idx) == 0:
                 continue
             uv, _ = cam.project(points[idx].reshape(-1, 3))
-            colour = bilinear(image, uv[:, 0], uv[:, 1]).reshape(len(idx), d, p * 3)
-            colour = colour - colour.mean(axis=2, keepdims=True)
+            colour = bilinear(image, uv[:, 0], uv[:, 1]).reshape(len(idx), d, p, 3)
+            colour = colour - np.einsum("ndpc,p->ndc", colour, weight)[:, :, None, :]
+            colour = (colour * np.sqrt(weight)[:, None]).reshape(len(idx), d, p * 3)
             colour /= np.maximum(np.linalg.norm(colour, axis=2, keepdims=True), 1e-6)
             colours[c] = np.zeros((n, d, p * 3), np.float32)
             colours[c][idx] = colour
@@ -177,7 +193,7 @@ def refine_along_normals(verts: np.ndarray, faces: np.ndarray, cameras: Sequence
     for _ in range(opt.rounds):
         offsets = np.arange(lo, hi + 0.5 * step, step)
         scores = sweep_scores(verts, normals, offsets, seen, cameras, images, opt.patch_spacing * spacing,
-                              opt.patch, opt.pair_share)
+                              opt.patch, opt.pair_share, opt.patch_sigma)
         valid = np.isfinite(scores[:, 0])
         filled = np.where(valid[:, None], scores, 0.0)
         agg = np.stack([smooth(filled[:, k], adj, opt.aggregate) for k in range(len(offsets))], axis=1)

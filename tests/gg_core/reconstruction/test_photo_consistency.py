@@ -53,7 +53,7 @@ def test_best_camera_pairs_ignore_a_camera_that_sees_something_else():
     mean_all = sweep_scores(verts + 0.02 * normals, normals, offsets, seen, cams, images, 0.005, 5, 1.0)
     best_half = sweep_scores(verts + 0.02 * normals, normals, offsets, seen, cams, images, 0.005, 5, 0.5)
     np.testing.assert_allclose(offsets[np.argmax(best_half, axis=1)], -0.02)
-    assert np.all(best_half.max(axis=1) > 0.9) and np.all(mean_all.max(axis=1) < 0.75)
+    assert np.all(best_half.max(axis=1) > 0.9) and np.all(mean_all.max(axis=1) < 0.8)
     # a vertex seen by one camera has no pair to score it
     seen[1:, 0] = False
     assert np.isnan(sweep_scores(verts, normals, offsets, seen, cams, images, 0.005, 5, 0.5)[0]).all()
