@@ -73,6 +73,22 @@ def test_refinement_moves_an_offset_plane_back_onto_the_textured_plane():
     assert log["rounds"][0]["confident_vertices"] > 0.8 * len(verts)
 
 
+def test_held_vertices_stay_and_the_rest_still_moves():
+    cams = _cameras()
+    images = [plane_image(c) for c in cams]
+    verts, faces = _plane(15, 0.3, 0.0)
+    if vertex_normals(verts, faces)[0, 2] < 0:
+        faces = faces[:, ::-1]
+    start = verts + [0.0, 0.0, 0.02]
+    far = RayCaster([(np.array([[9.0, 9, 9], [9.1, 9, 9], [9, 9.1, 9]]), np.array([[0, 1, 2]]))])
+    hold = np.abs(verts[:, 0]) > 0.14                  # the two outer columns
+    moved, _ = refine_along_normals(start, faces, cams, images, far, 0.005, PhotoOptions(search_in=0.04),
+                                    hold=hold)
+    np.testing.assert_allclose(moved[hold], start[hold], atol=1e-4)
+    centre = np.abs(verts[:, 0]) < 0.05
+    assert np.abs(moved[centre, 2]).mean() < 0.004
+
+
 def test_an_occluder_hides_the_vertices_behind_it_from_that_camera_only():
     cams = _cameras()
     verts, faces = _plane(5, 0.1, 0.0)
