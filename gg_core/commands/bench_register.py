@@ -2,9 +2,11 @@
 
 Runs stage 1 (gg template) once, then stage 2 (gg register) four times: full, only-rgb (no geometric terms),
 no-body (no collision term) and body-always (collision term from the first iteration), each into its own
-project folder holding a copy of the same stage 1 outputs. Prints one JSON line with, per ablation, the mean
-over sequences of CD (cm), p2m (cm), F-score@1cm (%), L_body and seconds per frame (wall and CPU), plus the paper's figures on
-4D-Dress for reference; a readable table goes to stderr. Without --capture the tiny preset is synthesized.
+project folder holding a copy of the same stage 1 outputs. The ablations switch loss terms only: every one keeps
+the tracker's multi-view stereo step after each frame (registration/stereo.py), which is not a loss term. Prints
+one JSON line with, per ablation, the mean over sequences of CD (cm), p2m (cm), F-score@1cm (%), L_body and
+seconds per frame (wall and CPU), plus the paper's figures on 4D-Dress for reference; a readable table goes to
+stderr. Without --capture the tiny preset is synthesized.
 """
 from __future__ import annotations
 

@@ -8,6 +8,7 @@ losses        geometric terms of registration: bending, StVK strain, body collis
 icp           first-frame alignment: rigid motion of the body under the garment, (scaled) ICP
 smooth_param  the smooth vertex parameterization the tracker optimizes ("large steps")
 tracker       per-frame optimization of the vertex positions (stage 2)
+stereo        multi-view stereo after each frame's fit: the photo-consistency sweep from the fitted mesh
 """
 import os
 
