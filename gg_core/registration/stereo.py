@@ -17,8 +17,15 @@ mean over the 10 (F@1cm):
 - border's 2 rings held: 0.418 / 0.375 / 0.981 (frames 0-7 at most 0.418; the front hem, where the swinging leg
   presses the skirt, went astray from frame 8);
 - also vertices within 2 cm of the body (a third of them): 0.423 / 0.434 / 0.481, mean 0.446 (91.6 %);
-- within 5 mm (the default): 0.418 / 0.394 / 0.450, mean 0.415 cm, p2m 0.377 cm, F@1cm 92.1 %, at 1.1 CPU-s per
-  frame (18.3 against 17.2 s for the fit).
+- within 5 mm: 0.418 / 0.394 / 0.450, mean 0.415 cm, p2m 0.377 cm, F@1cm 92.1 %, at 1.1 CPU-s per frame (18.3
+  against 17.2 s for the fit).
+OFF BY DEFAULT (TrackerConfig.stereo_rounds 0), because longer sequences diverge. The last setting on the full
+demo capture (30 frames per sequence): walk CD 0.42 / 0.39 (frame 4) / 0.45 (frame 10), then 0.53 / 0.69 / 0.99 and
+3.41 cm by frame 24; torso twist 0.46 cm up to frame 8, 3.31 cm by frame 23. The error starts at the front of the
+hem, where the swinging leg presses the skirt (frames 10-14: 87 -> 348 vertices more than 2 cm off, azimuth 60-90
+degrees first, then spreading up and around). The photometric fit alone also errs there, but it stays bounded
+(4.8 cm at most by frame 9). A wrong stereo move starts the next frame off, the fit follows partly, and the next
+sweep moves it further: a feedback loop, which a held-out length of 10 frames did not show.
 """
 from __future__ import annotations
 
