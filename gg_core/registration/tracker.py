@@ -127,8 +127,15 @@ def _active(schedule: str, phase: float) -> bool:
 
 @dataclass
 class FrameResult:
-    verts: np.ndarray
+    verts: np.ndarray                  # the frame's registered mesh
     log: dict = field(default_factory=dict)
+    fit: np.ndarray | None = None      # the photometric fit before the stereo step, if one ran
+
+    @property
+    def track(self) -> np.ndarray:
+        """What the next frame starts from and takes its rest shape from: the photometric fit. The stereo step
+        refines each frame's output only; fed back, its wrong moves compound (stereo.py)."""
+        return self.verts if self.fit is None else self.fit
 
 
 class Tracker:
@@ -228,23 +235,22 @@ class Tracker:
             calm = calm + 1 if motion < cfg.stop_motion and scale == 1.0 and phase >= 0.5 else 0
             if cfg.stop_patience and calm >= cfg.stop_patience:
                 break
-        final = x.detach().double()
-        stereo = None
+        fitted = x.detach().double()
+        final, stereo = fitted, None
         if cfg.stereo_rounds > 0:
-            contacts = body.contacts(final)
-            gap = ((final - contacts.points) * contacts.normals).sum(-1)
+            contacts = body.contacts(fitted)
+            gap = ((fitted - contacts.points) * contacts.normals).sum(-1)
             near_body = ((contacts.active > 0) & (gap < cfg.stereo_body_gap)).numpy()
-            moved, stereo = stereo_refine(final.numpy(), self.faces, views, (body_verts, self.collider.faces),
+            moved, stereo = stereo_refine(fitted.numpy(), self.faces, views, (body_verts, self.collider.faces),
                                           cfg.stereo_search, cfg.stereo_rounds, cfg.stereo_hold_rings, near_body)
             final = _pushed_out(torch.from_numpy(moved), body) if cfg.w_body > 0 else torch.from_numpy(moved)
-        verts = final.numpy()
         log = {"iterations": it + 1, "seconds": time.perf_counter() - start,
                "cpu_seconds": time.process_time() - cpu_start, "stereo": stereo,
                "l_body": float(body(final, body.contacts(final))),
                "rgb_first": trace["rgb"][0], "rgb_last": float(np.mean(trace["rgb"][-10:])),
                "weighted_terms_mean": {k: v / (it + 1) for k, v in term_sums.items()},
                "trace": trace}
-        return FrameResult(verts, log)
+        return FrameResult(final.numpy(), log, None if stereo is None else fitted.numpy())
 
     def _project_out(self, u: torch.Tensor, x: torch.Tensor, contacts, eps: float) -> torch.Tensor:
         """Moves the vertices closer than `eps` to the body along the contact normal to `eps` (the minimizer of

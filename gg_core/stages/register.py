@@ -297,8 +297,9 @@ def run_register(req: RegisterRequest) -> Path:
         for k, frame in enumerate(frames):
             key = _digest([key, frame, frame_files(seq, frame)])
             mesh_path = out_dir / "meshes" / f"{frame}.ply"
+            fit_path = out_dir / "fit" / f"{frame}.ply"     # the photometric fit, where a stereo step refined it
             if mesh_path.is_file() and logs.get(frame, {}).get("key") == key:
-                previous = (previous + [read_mesh(mesh_path)[0]])[-2:]
+                previous = (previous + [read_mesh(fit_path if fit_path.is_file() else mesh_path)[0]])[-2:]
                 progress.step(f"{seq.name} {frame}: unchanged, kept", advance=2 if k == 0 else 1)
                 continue
             body = load_body(seq, frame)
@@ -313,8 +314,12 @@ def run_register(req: RegisterRequest) -> Path:
                 iterations = config.iterations
             result = tracker.fit_frame(guess, views, body[0], previous=previous[-1] if previous else None,
                                        iterations=iterations)
+            if result.fit is not None:
+                write_ply(fit_path, result.fit, stage1.faces)
+            elif fit_path.is_file():            # left by a run with the stereo step: not this fit's
+                fit_path.unlink()
             write_ply(mesh_path, result.verts, stage1.faces)
-            previous = (previous + [result.verts])[-2:]
+            previous = (previous + [result.track])[-2:]
             logs[frame] = {"key": key, **{k2: v for k2, v in result.log.items() if k2 != "trace"}}
             logs["_alignment"] = align_log
             write_json(log_path, logs)

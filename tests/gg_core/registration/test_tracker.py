@@ -120,3 +120,6 @@ def test_stereo_step_refines_the_fit_when_switched_on(sheet_scene, monkeypatch):
     assert calls == [(0.01, 2, config.stereo_hold_rings, np.dtype(bool), (len(sheet_scene.verts),), 4, (1, 3))]
     np.testing.assert_allclose(on.verts - off.verts, np.tile([0.0, 0.0, 0.001], (len(on.verts), 1)), atol=1e-6)
     assert len(on.log["stereo"]["rounds"]) == 2
+    # the next frame starts from the photometric fit, not from the refined output
+    assert off.fit is None and np.array_equal(off.track, off.verts)
+    np.testing.assert_allclose(on.track, off.verts, atol=1e-9)
