@@ -9,8 +9,8 @@ mesh itself and the frame's body (the fit is near the cloth: a fold's ridge hide
 
 The garment's border rings are held, and so are vertices touching the body: a patch there straddles the cloth's
 edge or lies on the skin, and two cameras that see the same background or leg can agree at a wrong depth.
-Measured on the demo capture's walk, frames 0-9 from the 0.441 cm template, CD (cm) of frames 0 / 4 / 9 and the
-mean over the 10 (F@1cm):
+Measured fed back (the next frame started from the refined mesh) on the demo capture's walk, frames 0-9 from the
+0.441 cm template, CD (cm) of frames 0 / 4 / 9 and the mean over the 10 (F@1cm):
 - photometric fit alone: 0.441 / 0.510 / 0.548, mean 0.502 (89.0 %): the drift;
 - with this step, nothing held: 0.417 / 0.426, then the hem went astray from frame 5 and took the fit with it
   (frame 7 0.76, frame 9 3.13 cm);
@@ -19,13 +19,15 @@ mean over the 10 (F@1cm):
 - also vertices within 2 cm of the body (a third of them): 0.423 / 0.434 / 0.481, mean 0.446 (91.6 %);
 - within 5 mm: 0.418 / 0.394 / 0.450, mean 0.415 cm, p2m 0.377 cm, F@1cm 92.1 %, at 1.1 CPU-s per frame (18.3
   against 17.2 s for the fit).
-OFF BY DEFAULT (TrackerConfig.stereo_rounds 0), because longer sequences diverge. The last setting on the full
-demo capture (30 frames per sequence): walk CD 0.42 / 0.39 (frame 4) / 0.45 (frame 10), then 0.53 / 0.69 / 0.99 and
-3.41 cm by frame 24; torso twist 0.46 cm up to frame 8, 3.31 cm by frame 23. The error starts at the front of the
-hem, where the swinging leg presses the skirt (frames 10-14: 87 -> 348 vertices more than 2 cm off, azimuth 60-90
-degrees first, then spreading up and around). The photometric fit alone also errs there, but it stays bounded
-(4.8 cm at most by frame 9). A wrong stereo move starts the next frame off, the fit follows partly, and the next
-sweep moves it further: a feedback loop, which a held-out length of 10 frames did not show.
+Over longer sequences, fed back, the step diverged: the full demo sequences (30 frames) held to frame 11 and
+then went astray: walk 0.45 cm at frame 10, then 0.53 / 0.69 / 0.99 and 3.41 cm by frame 24; torso twist 3.31
+cm by frame 23 (a ±8 mm search: walk 1.25 cm by frame 19; also a 1 cm body gap: 0.8 cm by frame 20).
+The error starts at the front of the hem, where the swinging leg presses the skirt: a wrong move
+starts the next frame off, the fit follows partly, and the next sweep moves it further. So the step refines each
+frame's output only and the next frame starts from the photometric fit (tracker.FrameResult.track; stage 2 keeps
+the fits in stage2/<sequence>/fit/ for resuming). Demo walk, all 30 frames, CD of frames 0 / 10 / 20 / 29 and
+the mean (p2m, F@1cm): the fit alone 0.44 / 0.56 / 0.52 / 0.57, mean 0.530 cm (0.484 cm, 87.9 %); refined
+0.42 / 0.43 / 0.43 / 0.43, mean 0.419 cm (0.377 cm, 92.4 %).
 """
 from __future__ import annotations
 

@@ -113,7 +113,7 @@ def test_stereo_step_refines_the_fit_when_switched_on(sheet_scene, monkeypatch):
         return verts + [0.0, 0.0, 0.001], {"rounds": [{}] * rounds}
 
     monkeypatch.setattr(tracker_module, "stereo_refine", fake)
-    off = fit(sheet_scene, sheet_scene.verts, TrackerConfig(lr=1e-12, coarse_scale=1.0, w_body=0.0), 2)
+    off = fit(sheet_scene, sheet_scene.verts, TrackerConfig(lr=1e-12, coarse_scale=1.0, w_body=0.0, stereo_rounds=0), 2)
     assert not calls and off.log["stereo"] is None
     config = TrackerConfig(lr=1e-12, coarse_scale=1.0, w_body=0.0, stereo_rounds=2, stereo_search=0.01)
     on = fit(sheet_scene, sheet_scene.verts, config, 2)
