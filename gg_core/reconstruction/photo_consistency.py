@@ -160,15 +160,16 @@ def sweep_scores(verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, se
 def _best_pairs(colours: dict[int, np.ndarray], seen: np.ndarray, d: int, share: float) -> np.ndarray:
     """[n, d] mean over the best `share` of the pairwise NCCs (at least one pair) at each of the d depths."""
     cams = sorted(colours)
-    pairs = [(i, j) for k, i in enumerate(cams) for j in cams[k + 1:] if (seen[i] & seen[j]).any()]
+    both = {(i, j): seen[i] & seen[j] for k, i in enumerate(cams) for j in cams[k + 1:]}
+    pairs = [pair for pair, mask in both.items() if mask.any()]
     n = seen.shape[1]
     if not pairs:
         return np.full((n, d), np.nan)
     ncc = np.full((len(pairs), n, d), -np.inf, np.float32)
     for k, (i, j) in enumerate(pairs):
-        both = seen[i] & seen[j]
-        ncc[k, both] = np.einsum("ndk,ndk->nd", colours[i][both], colours[j][both])
-    count = (seen[pairs, :].all(axis=1)).sum(axis=0)                 # [n] pairs that see each vertex
+        mask = both[i, j]
+        ncc[k, mask] = np.einsum("ndk,ndk->nd", colours[i][mask], colours[j][mask])
+    count = np.sum([both[pair] for pair in pairs], axis=0)          # [n] pairs that see each vertex
     keep = np.maximum(1, np.ceil(share * count)).astype(np.int64)
     ranked = -np.sort(-ncc, axis=0)                                   # best pair first at each depth
     used = np.arange(len(pairs))[:, None, None] < keep[None, :, None]
@@ -212,7 +213,7 @@ def refine_along_normals(verts: np.ndarray, faces: np.ndarray, cameras: Sequence
         move = sp.linalg.spsolve(system, w * target)
         verts += move[:, None] * normals
         total_offset += move
-        confident = (w > 0) & (w < HOLD_WEIGHT)
+        confident = (w > 0) if hold is None else (w > 0) & ~hold
         log["rounds"].append({"search_m": [float(lo), float(hi)], "confident_vertices": int(confident.sum()),
                               "mean_score": float(np.mean(confidence[confident])) if confident.any() else 0.0,
                               "mean_move_m": float(np.abs(move).mean())})

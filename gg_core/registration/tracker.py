@@ -238,9 +238,7 @@ class Tracker:
         fitted = x.detach().double()
         final, stereo = fitted, None
         if cfg.stereo_rounds > 0:
-            contacts = body.contacts(fitted)
-            gap = ((fitted - contacts.points) * contacts.normals).sum(-1)
-            near_body = ((contacts.active > 0) & (gap < cfg.stereo_body_gap)).numpy()
+            near_body = (_depth(fitted, body.contacts(fitted), cfg.stereo_body_gap) > 0).numpy()
             moved, stereo = stereo_refine(fitted.numpy(), self.faces, views, (body_verts, self.collider.faces),
                                           cfg.stereo_search, cfg.stereo_rounds, cfg.stereo_hold_rings, near_body)
             final = _pushed_out(torch.from_numpy(moved), body) if cfg.w_body > 0 else torch.from_numpy(moved)
