@@ -19,7 +19,8 @@ import numpy as np
 
 from ..errors import InputError
 
-HELP = "Gaussian rasterizer: forward+backward ms of the numba CPU backend vs a tiled PyTorch baseline"
+HELP = ("Gaussian rasterizer: forward+backward ms of the numba CPU backend vs a tiled PyTorch baseline "
+        "(+ gsplat on CUDA where it runs)")
 
 SCENE_KEYS = ("means", "quats", "scales", "opacities", "K", "w2c", "width", "height", "background")
 STANDARD = {"gaussians": 16384, "width": 512, "height": 512}
@@ -60,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
         "grad_colors_rel_diff": _rel(fast["grads"]["colors"], base["grads"]["colors"]),
         "threads": {"numba": _numba_threads(), "torch": torch.get_num_threads()},
         "load_avg_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count(),
+        "gsplat": _gsplat_figures(scene, weights, args.runs, fast),
     }
     if args.out:
         from ..storage import write_npz  # noqa: PLC0415
@@ -174,15 +176,21 @@ def tiled_torch_rasterize(screen, width: int, height: int, background):
     return {"image": image, "alpha": alpha, "depth": depth}
 
 
+def _scene_params(scene: dict, device: str = "cpu") -> dict:
+    import torch  # noqa: PLC0415
+
+    colour_key = "colors" if "colors" in scene else "sh"
+    return {k: torch.tensor(np.asarray(scene[k]), dtype=torch.float32, device=device, requires_grad=True)
+            for k in ("means", "quats", "scales", "opacities", colour_key)}
+
+
 def _measure(scene: dict, weights, rasterize, runs: int) -> dict:
     import torch  # noqa: PLC0415
 
     from ..gaussians.projection import camera_tensors, project  # noqa: PLC0415
     from ..gaussians.splats import Gaussians  # noqa: PLC0415
 
-    colour_key = "colors" if "colors" in scene else "sh"
-    params = {k: torch.tensor(np.asarray(scene[k]), dtype=torch.float32, requires_grad=True)
-              for k in ("means", "quats", "scales", "opacities", colour_key)}
+    params = _scene_params(scene)
     K, w2c = camera_tensors(scene["K"], scene["w2c"], torch.float32)
     width, height = int(scene["width"]), int(scene["height"])
     bg = torch.as_tensor(np.asarray(scene["background"]), dtype=torch.float32)
@@ -206,6 +214,56 @@ def _measure(scene: dict, weights, rasterize, runs: int) -> dict:
     grads["colors"] = screen.colors.grad.numpy()  # per-Gaussian RGB (after SH evaluation for SH input)
     return {"forward_ms": statistics.median(fwd), "backward_ms": statistics.median(bwd), "first_ms": first_ms,
             "image": out["image"].detach().numpy(), "alpha": out["alpha"].detach().numpy(), "grads": grads}
+
+
+def _gsplat_figures(scene: dict, weights, runs: int, cpu: dict) -> dict:
+    """gsplat (CUDA) on the same scene and loss, against the CPU backend's result, where CUDA and gsplat run.
+
+    Timed with CUDA synchronisation around each phase; the first call (gsplat's JIT build on a fresh
+    machine) is reported apart. Image and gradient agreement are measured against the CPU backend.
+    """
+    import torch  # noqa: PLC0415
+
+    from ..capture.cameras import Camera  # noqa: PLC0415
+    from ..gaussians.render import gsplat_available, render  # noqa: PLC0415
+    from ..gaussians.splats import Gaussians  # noqa: PLC0415
+
+    if not gsplat_available():
+        return {"available": False, "why": "needs CUDA and the gsplat package"}
+    params = _scene_params(scene, "cuda")
+    width, height = int(scene["width"]), int(scene["height"])
+    w2c = np.asarray(scene["w2c"], float)
+    camera = Camera("bench", np.asarray(scene["K"], float), w2c[:3, :3], w2c[:3, 3], width, height)
+    bg, w = torch.as_tensor(np.asarray(scene["background"]), dtype=torch.float32, device="cuda"), weights.cuda()
+    fwd, bwd = [], []
+    for i in range(runs + 1):
+        for p in params.values():
+            p.grad = None
+        torch.cuda.synchronize()
+        t0 = time.perf_counter()
+        out = render(Gaussians(**params), camera, bg, backend="gsplat")
+        torch.cuda.synchronize()
+        t1 = time.perf_counter()
+        (out["image"] * w).sum().backward()
+        torch.cuda.synchronize()
+        t2 = time.perf_counter()
+        if i == 0:
+            first_ms = 1e3 * (t2 - t0)
+        else:
+            fwd.append(1e3 * (t1 - t0))
+            bwd.append(1e3 * (t2 - t1))
+    m = {"forward_ms": statistics.median(fwd), "backward_ms": statistics.median(bwd)}
+    image = out["image"].detach().cpu().numpy()
+    grad_means = params["means"].grad.cpu().numpy().ravel()
+    cpu_means = cpu["grads"]["means"].ravel()
+    cosine = float(grad_means @ cpu_means / max(np.linalg.norm(grad_means) * np.linalg.norm(cpu_means), 1e-30))
+    return {"available": True, "device": torch.cuda.get_device_name(),
+            **_figures(m, len(scene["means"]) * width * height),
+            "first_call_ms": round(first_ms, 1),
+            "speedup_vs_cpu": round((cpu["forward_ms"] + cpu["backward_ms"]) / (m["forward_ms"] + m["backward_ms"]), 2),
+            "max_abs_image_diff_vs_cpu": float(np.abs(image - cpu["image"]).max()),
+            "mean_abs_image_diff_vs_cpu": float(np.abs(image - cpu["image"]).mean()),
+            "grad_means_cosine_vs_cpu": round(cosine, 4)}
 
 
 def _figures(m: dict, gauss_pixels: int) -> dict:

@@ -10,7 +10,7 @@ import torch
 from gg_core.capture.cameras import Camera
 from gg_core.cli import main
 from gg_core.commands.bench_raster import standard_scene
-from gg_core.gaussians.render import render
+from gg_core.gaussians.render import gsplat_available, render
 from gg_core.gaussians.splats import Gaussians
 
 
@@ -27,6 +27,10 @@ def test_scene_file_in_out_npz_out(tmp_path, capsys, scene):
     for key in ("forward_ms", "backward_ms", "total_ms", "gaussians_x_pixels_per_s"):
         assert line[key] > 0 and line["baseline"][key] > 0
     assert line["max_abs_image_diff"] < 1e-4 and line["grad_means_rel_diff"] < 1e-4
+    gpu = line["gsplat"]
+    assert gpu["available"] == gsplat_available()
+    if gpu["available"]:  # where CUDA and gsplat run: same scene, close images and gradients
+        assert gpu["total_ms"] > 0 and gpu["mean_abs_image_diff_vs_cpu"] < 2e-3 and gpu["grad_means_cosine_vs_cpu"] > 0.98
     with np.load(tmp_path / "out.npz") as out:
         assert out["image"].shape == (40, 48, 3) and out["image"].dtype == np.float32
         assert out["alpha"].shape == (40, 48) and float(out["forward_ms"]) > 0 and float(out["backward_ms"]) > 0
