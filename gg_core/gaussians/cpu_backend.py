@@ -57,8 +57,9 @@ class _Rasterize(torch.autograd.Function):
     def backward(ctx, g_image, g_alpha, g_depth):
         packed, offsets, ids, order, xs, ys, bg, consts, t_final, n_used, n = ctx.state
         h, w = t_final.shape
-        g_image, g_alpha, g_depth = (np.zeros(shape, packed.dtype) if grad is None else _np(grad).astype(packed.dtype, copy=False)
-                                     for grad, shape in ((g_image, (h, w, 3)), (g_alpha, (h, w)), (g_depth, (h, w))))
+        g_image, g_alpha, g_depth = (
+            np.zeros(shape, packed.dtype) if grad is None else _np(grad).astype(packed.dtype, copy=False)
+            for grad, shape in ((g_image, (h, w, 3)), (g_alpha, (h, w)), (g_depth, (h, w))))
         pair_grads = np.empty((ids.shape[0], K.GRAD), packed.dtype)
         with numba.parallel_chunksize(1):
             K.backward(packed, offsets, order, xs, ys, K.TILE, bg, consts, t_final, n_used,
