@@ -11,6 +11,10 @@ class InputError(Exception):
         self.fix = fix
         super().__init__(self.line())
 
+    def __reduce__(self):
+        """Pickles with its three parts (a worker process's error re-raised in the parent reads the same)."""
+        return type(self), (self.what, self.where, self.fix)
+
     def line(self) -> str:
         parts = [self.what] + [p for p in (self.where, self.fix) if p]
         return "gg: error: " + ", ".join(parts)

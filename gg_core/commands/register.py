@@ -15,7 +15,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("capture", type=Path, help="capture folder (REFERENCE.md §1 layout)")
     parser.add_argument("--project", type=Path, required=True,
                         help="project folder holding stage1/ (from gg template); stage2/ and reports/ are written")
-    parser.add_argument("--sequences", nargs="+", default=[], metavar="SEQ", help="sequences to register (default: all)")
+    parser.add_argument("--sequences", nargs="+", default=[], metavar="SEQ",
+                        help="sequences to register (default: all)")
     parser.add_argument("--ablation", choices=ABLATION_CHOICES, default="full",
                         help="loss terms: full (default), only-rgb (no geometric terms), no-body (no body "
                              "collision term), body-always (body term in every iteration, not only the second half)")
@@ -38,6 +39,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "the demo capture; fewer: faster, the mesh drifts more; 0: off)")
     parser.add_argument("--renders", type=int, default=3, help="frames per sequence rendered for inspection")
     parser.add_argument("--seed", type=int, default=0, help="seed of the camera sampling")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="sequences registered at once, each in its own single-threaded process (default: one "
+                             "per CPU core, at most one per sequence; 1: one after another in this process)")
     add_progress_option(parser)
 
 
@@ -50,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
                                           align=args.align, icp_scale=args.icp_scale,
                                           texture_factor=args.texture_factor,
                                           texture_refit=args.texture_refit, renders=args.renders, seed=args.seed,
-                                          progress=args.progress))
+                                          workers=args.workers, progress=args.progress))
     if args.progress != "jsonl":
         data = json.loads(report.read_text())
         print(json.dumps({"report": str(report), "ablation": data["ablation"], **data["mean"]}))

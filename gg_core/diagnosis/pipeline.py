@@ -52,7 +52,8 @@ class Result:
     selection: Selection
     trials: dict[str, Trial]
     accepted: list[str]
-    null: Trial                        # the baseline refitted with no candidate (what trials are judged against)
+    null: Trial                        # what trials are judged against (judge_reference)
+    null_refit: Trial                  # the baseline refitted with no candidate, as each trial is
     heldout_after: float
     baseline: dict[str, float]
     nuisance: dict[str, float]
@@ -143,6 +144,7 @@ class Result:
                                                      "best_patch_explained": float(r.patch_explained.max())}
                                                  for n, r in self.scans.items()}},
             "train_rollout_l2_before": self.null.train_l2,
+            "null_refit": {"heldout_l2": self.null_refit.heldout_l2, "train_rollout_l2": self.null_refit.train_l2},
             "reference_trials": {n: {"heldout_l2": t.heldout_l2, "heldout_gain": self.gain(t),
                                      "train_rollout_gain": self.train_gain(t), "refit": t.values}
                                  for n, t in self.reference.items()},
@@ -164,9 +166,10 @@ def fit_config(req: DiagnoseRequest, iterations: int) -> FitConfig:
 
 def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, body_faces: np.ndarray,
               attached: np.ndarray, hands: np.ndarray | None, progress: Progress
-              ) -> tuple[ImplicitSimulator, BehaviorParams, dict[str, float], list[np.ndarray]]:
+              ) -> tuple[ImplicitSimulator, BehaviorParams, dict[str, float], list[np.ndarray], float]:
     """The global-parameter fit from each of MARGIN_STARTS, kept by the training sequences' free-rollout error;
-    also returns the kept fit's free rollouts of the training sequences (the activity map compares them).
+    also returns the kept fit's free rollouts of the training sequences (the activity map compares them) and
+    their error.
 
     The teacher-forced loss starts every step from an observed state, so with noisy positions near the body the
     contact margin has several local minima (measured on a capture with 1.5 mm noise: the fit stayed at the 3 mm
@@ -196,7 +199,7 @@ def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, bo
         if best is None or error < best[2]:
             best = (sim, params, error, rollouts)
     progress.step("baseline fitted (global parameters only)")
-    return best[0], best[1], starts, best[3]
+    return best[0], best[1], starts, best[3], best[2]
 
 
 def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed], faces: np.ndarray,
@@ -206,7 +209,8 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     collide, `reference_region` the region reference trials of region candidates use."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    sim, params, starts, train_rollouts = _baseline(req, train, faces, body_faces, attached, hands, progress)
+    sim, params, starts, train_rollouts, baseline_train_l2 = _baseline(req, train, faces, body_faces, attached,
+                                                                       hands, progress)
     baseline_l2 = float(np.mean([rollout_error(sim, obs, attached) for obs in heldout]))
     timings["baseline_s"] = time.perf_counter() - t0
 
@@ -242,9 +246,10 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     # the same refit without any candidate: trials are judged against equal optimization effort, so a gain cannot
     # come from the baseline fit simply running longer
     refit_config = fit_config(req, req.refit_iterations)
-    null = trial(sim, BASELINE_FIT, [], ctx, None, train, heldout, attached, refit_config)
+    null_refit = trial(sim, BASELINE_FIT, [], ctx, None, train, heldout, attached, refit_config)
+    null = judge_reference(Trial([], baseline_l2, float("nan"), baseline_train_l2), null_refit)
     before = null.heldout_l2
-    progress.step(f"baseline refit: held-out L2 {baseline_l2 * 1e3:.1f} -> {before * 1e3:.1f} mm")
+    progress.step(f"baseline refit: held-out L2 {baseline_l2 * 1e3:.1f} -> {null_refit.heldout_l2 * 1e3:.1f} mm")
     proposed = propose(sel, req.min_inclusion, req.max_trials)
     trials = {}
     for n in proposed:
@@ -284,8 +289,23 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     baseline["heldout_l2_global_fit"] = baseline_l2
     baseline["internal_damping_loss_factor"] = 2.0 * np.pi * baseline["viscoelastic_damping.tau"]   # at 1 Hz
     baseline.update(starts)
-    return Result(loc, sel, trials, accepted, null, after, baseline, dict(zip(labels, adjust.tolist())), batch,
-                  unphysical, progress, reference, timings, scans)
+    return Result(loc, sel, trials, accepted, null, null_refit, after, baseline, dict(zip(labels, adjust.tolist())),
+                  batch, unphysical, progress, reference, timings, scans)
+
+
+def judge_reference(baseline: Trial, null_refit: Trial) -> Trial:
+    """What trials must beat: the better of the baseline fit and its refit without candidates, on held-out and on
+    training rollouts each (so a trial must beat both fits on both).
+
+    Why: the refit minimises a loss a few frames ahead, and now and then it worsens the free rollouts; then any
+    trial, whose extra freedom lets its refit end elsewhere, recovers that loss and seems to gain. Measured on the
+    benchmark at 1.5 mm noise (hidden rest-length change, seed 2): the refit worsened held-out 6.88 -> 8.41 mm,
+    every candidate then gained 10-15 % (wind, mass damping, air drag; the true rest-length term 10.7 % at a
+    refitted scale of 1.005, i.e. no change) and quadratic drag was named, a wrong class. Judged against the better
+    fit, no candidate passes there. Re-judging the other 24 stored benchmark reports (noise 0 and 1.5 mm) with this
+    rule changed no other verdict."""
+    return Trial([], min(baseline.heldout_l2, null_refit.heldout_l2), null_refit.train_loss,
+                 min(baseline.train_l2, null_refit.train_l2), start="better of the baseline fit and its refit")
 
 
 def confirmed(t: Trial, reference: Trial, min_gain: float, min_gain_mm: float) -> bool:

@@ -15,7 +15,8 @@ it through the force library, refit, and show the held-out rollout error before 
 5. Confirmation: the selected candidates, then the others by the share of the residual they explain, up to
    `max_trials`, are each added to the simulator and refitted; the best is accepted only if the held-out
    rollout error drops by at least `min_gain` (and `min_gain_mm`) and the training sequences' free rollouts
-   improve too.
+   improve too, each against the better of the baseline fit and its refit without candidates
+   (pipeline.judge_reference).
 
 Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply) or, for synthetic captures, the ground-truth meshes,
 optionally with spatially correlated noise (motion.py: `--source`, auto by default). truth.json is read only for

@@ -13,7 +13,9 @@ Outputs: <project>/stage2/<sequence>/meshes/<frame>.ply (template topology), ren
 <project>/stage2/<sequence>/frames.json (per-frame logs and input keys) and <project>/reports/register.json
 with per sequence cd_cm, p2m_cm, fscore_1cm (only when the capture has ground-truth meshes), l_body (the
 body term's value at the end of each frame's fit, mean over frames), s_per_frame (wall clock of the fit) and
-cpu_s_per_frame. Ground truth is read only to score finished meshes.
+cpu_s_per_frame, and over all sequences wall_s_per_frame (the tracking's wall clock over the frames: sequences
+are registered at once, one single-threaded process each, gg_core/parallel.py). Ground truth is read only to
+score finished meshes.
 
 Resumable per frame: a frame is skipped when its mesh exists and its key (stage 1 files, options, the frame's
 input files and the previous frame's key) is unchanged; changing one frame refits the frames after it.
@@ -32,6 +34,7 @@ from ..capture.layout import FOREGROUND_MASK, GARMENT_MASK, RGB, Capture, Sequen
 from ..errors import InputError
 from ..geometry.meshio import read_mesh, read_obj, write_ply
 from ..jobs import Progress
+from ..parallel import default_workers, run_jobs
 from ..storage import atomic_path, file_stamps, write_json, write_npz, write_report
 
 STAGE = "register"
@@ -55,6 +58,7 @@ class RegisterRequest:
     texture_refit: int = 1250            # appearance steps refitting a coarsened texture on the template frame
     renders: int = 3                     # frames per sequence rendered for inspection
     seed: int = 0
+    workers: int | None = None           # sequences registered at once, one process each (None: one per core)
     progress: str = "bar"
 
 
@@ -234,11 +238,8 @@ def align_first_frame(capture: Capture, project: Path, seq: Sequence, frame: str
 
 
 def run_register(req: RegisterRequest) -> Path:
-    from ..metrics.surface import surface_metrics  # noqa: PLC0415
-    from ..physics.contact import BodyCollider  # noqa: PLC0415
-    from ..registration.tracker import Tracker, TrackerConfig, ablation_config  # noqa: PLC0415
-    from ..registration.views import load_body, load_views  # noqa: PLC0415
-    from .behavior import hand_mask  # noqa: PLC0415
+    from ..registration.tracker import TrackerConfig, ablation_config  # noqa: PLC0415
+    from ..registration.views import load_views  # noqa: PLC0415
 
     start = time.perf_counter()
     capture = Capture(req.capture)
@@ -260,6 +261,8 @@ def run_register(req: RegisterRequest) -> Path:
                              "pass a positive count")
         base = TrackerConfig(iterations=req.iterations, first_iterations=max(1, req.iterations * 8 // 3),
                              seed=req.seed)
+    if req.workers is not None and req.workers < 1:
+        raise InputError(f"--workers must be at least 1, got {req.workers}", "--workers", "pass 1 or more")
     if req.align not in ALIGN_MODES:
         raise InputError(f"unknown alignment '{req.align}'", "--align", f"choose one of {', '.join(ALIGN_MODES)}")
     try:
@@ -282,61 +285,95 @@ def run_register(req: RegisterRequest) -> Path:
     progress.step(f"registration texture: 1/{factor} resolution" + (
         f", refitted: L_rgb {refit_log['rgb_loss_before']:.4f} -> {refit_log['rgb_loss_after']:.4f}"
         if refit_log["steps"] else ""))
-    report: dict[str, dict] = {}
-    for seq in seqs:
-        frames = frames_of[seq.name]
-        out_dir = project / "stage2" / seq.name
-        log_path = out_dir / "frames.json"
-        logs = json.loads(log_path.read_text()) if log_path.is_file() else {}
-        body0 = load_body(seq, frames[0])
-        collider = BodyCollider(body0[1], len(body0[0]), exclude=hand_mask(len(body0[0])))
-        tracker = Tracker(texture, stage1.verts, stage1.faces, collider, config)
-        key = _digest([stage1.files, options, seq.name])
-        previous: list[np.ndarray] = []
-        align_log: dict = logs.get("_alignment", {})
-        for k, frame in enumerate(frames):
-            key = _digest([key, frame, frame_files(seq, frame)])
-            mesh_path = out_dir / "meshes" / f"{frame}.ply"
-            fit_path = out_dir / "fit" / f"{frame}.ply"     # the photometric fit, where a stereo step refined it
-            if mesh_path.is_file() and logs.get(frame, {}).get("key") == key:
-                previous = (previous + [read_mesh(fit_path if fit_path.is_file() else mesh_path)[0]])[-2:]
-                progress.step(f"{seq.name} {frame}: unchanged, kept", advance=2 if k == 0 else 1)
-                continue
-            body = load_body(seq, frame)
-            views = load_views(seq, frame, body=body)
-            if k == 0:
-                guess, align_log = align_first_frame(capture, project, seq, frame, stage1.verts, body[0],
-                                                     req.align, req.icp_scale)
-                progress.step(f"{seq.name}: aligned the template ({req.align})")
-                iterations = config.first_iterations
-            else:
-                guess = previous[-1] if len(previous) < 2 else 2 * previous[-1] - previous[-2]
-                iterations = config.iterations
-            result = tracker.fit_frame(guess, views, body[0], previous=previous[-1] if previous else None,
-                                       iterations=iterations)
-            if result.fit is not None:
-                write_ply(fit_path, result.fit, stage1.faces)
-            elif fit_path.is_file():            # left by a run with the stereo step: not this fit's
-                fit_path.unlink()
-            write_ply(mesh_path, result.verts, stage1.faces)
-            previous = (previous + [result.track])[-2:]
-            logs[frame] = {"key": key, **{k2: v for k2, v in result.log.items() if k2 != "trace"}}
-            logs["_alignment"] = align_log
-            write_json(log_path, logs)
-            progress.step(f"{seq.name} {frame}: {result.log['iterations']} iterations, "
-                          f"{result.log['seconds']:.1f} s")
-        report[seq.name] = sequence_report(seq, frames, logs, stage1.faces, out_dir, surface_metrics)
-        report[seq.name]["alignment"] = align_log
-        _write_renders(seq, frames, out_dir, stage1, req.renders)
-    payload = {"ablation": req.ablation, "sequences": report, "mean": _mean_metrics(report),
+    jobs = [SequenceJob(req.capture, project, s.name, frames_of[s.name], texture.state(), config, options, req.align,
+                        req.icp_scale, req.renders) for s in seqs]
+    workers = req.workers if req.workers is not None else default_workers(len(jobs))
+    tracking = time.perf_counter()
+    report = dict(zip(names, run_jobs(register_sequence, jobs, workers, progress)))
+    tracked_frames = sum(len(f) for f in frames_of.values())
+    mean = {**_mean_metrics(report), "wall_s_per_frame": (time.perf_counter() - tracking) / tracked_frames}
+    payload = {"ablation": req.ablation, "sequences": report, "mean": mean,
                "template": {"vertices": len(stage1.verts), "faces": len(stage1.faces),
                             "gaussians": len(stage1.texture), "texture_factor": factor,
                             "registration_gaussians": len(texture), "texture_refit": refit_log},
-               "tracker": asdict(config), "seconds": time.perf_counter() - start,
+               "tracker": asdict(config), "workers": min(workers, len(jobs)),
+               "seconds": time.perf_counter() - start,
                "inputs": {"stage1": stage1.files, "options": options}}
     path = write_report(project, STAGE, payload)
     progress.done(str(path))
     return path
+
+
+@dataclass
+class SequenceJob:
+    """One sequence's registration: everything a worker process needs (it loads stage 1 itself)."""
+    capture: Path
+    project: Path
+    sequence: str
+    frames: list[str]
+    texture: dict                        # the registration texture's state (GaussianTexture.from_state)
+    config: object                       # TrackerConfig
+    options: dict                        # what the frames' keys are made of
+    align: str
+    icp_scale: bool
+    renders: int
+
+
+def register_sequence(job: SequenceJob, step) -> dict:
+    """Fit every frame of one sequence (resuming unchanged frames), write its meshes, logs and renders; returns
+    its report entry. `step(message, advance)` reports progress."""
+    from ..gaussians.texture import GaussianTexture  # noqa: PLC0415 - torch
+    from ..metrics.surface import surface_metrics  # noqa: PLC0415
+    from ..physics.contact import BodyCollider  # noqa: PLC0415
+    from ..registration.tracker import Tracker  # noqa: PLC0415
+    from ..registration.views import load_body, load_views  # noqa: PLC0415
+    from .behavior import hand_mask  # noqa: PLC0415
+
+    capture, stage1 = Capture(job.capture), load_stage1(job.project)
+    seq, frames, config = capture.sequence(job.sequence), job.frames, job.config
+    out_dir = job.project / "stage2" / seq.name
+    log_path = out_dir / "frames.json"
+    logs = json.loads(log_path.read_text()) if log_path.is_file() else {}
+    body0 = load_body(seq, frames[0])
+    collider = BodyCollider(body0[1], len(body0[0]), exclude=hand_mask(len(body0[0])))
+    tracker = Tracker(GaussianTexture.from_state(job.texture), stage1.verts, stage1.faces, collider, config)
+    key = _digest([stage1.files, job.options, seq.name])
+    previous: list[np.ndarray] = []
+    align_log: dict = logs.get("_alignment", {})
+    for k, frame in enumerate(frames):
+        key = _digest([key, frame, frame_files(seq, frame)])
+        mesh_path = out_dir / "meshes" / f"{frame}.ply"
+        fit_path = out_dir / "fit" / f"{frame}.ply"     # the photometric fit, where a stereo step refined it
+        if mesh_path.is_file() and logs.get(frame, {}).get("key") == key:
+            previous = (previous + [read_mesh(fit_path if fit_path.is_file() else mesh_path)[0]])[-2:]
+            step(f"{seq.name} {frame}: unchanged, kept", 2 if k == 0 else 1)
+            continue
+        body = load_body(seq, frame)
+        views = load_views(seq, frame, body=body)
+        if k == 0:
+            guess, align_log = align_first_frame(capture, job.project, seq, frame, stage1.verts, body[0],
+                                                 job.align, job.icp_scale)
+            step(f"{seq.name}: aligned the template ({job.align})")
+            iterations = config.first_iterations
+        else:
+            guess = previous[-1] if len(previous) < 2 else 2 * previous[-1] - previous[-2]
+            iterations = config.iterations
+        result = tracker.fit_frame(guess, views, body[0], previous=previous[-1] if previous else None,
+                                   iterations=iterations)
+        if result.fit is not None:
+            write_ply(fit_path, result.fit, stage1.faces)
+        elif fit_path.is_file():            # left by a run with the stereo step: not this fit's
+            fit_path.unlink()
+        write_ply(mesh_path, result.verts, stage1.faces)
+        previous = (previous + [result.track])[-2:]
+        logs[frame] = {"key": key, **{k2: v for k2, v in result.log.items() if k2 != "trace"}}
+        logs["_alignment"] = align_log
+        write_json(log_path, logs)
+        step(f"{seq.name} {frame}: {result.log['iterations']} iterations, {result.log['seconds']:.1f} s")
+    report = sequence_report(seq, frames, logs, stage1.faces, out_dir, surface_metrics)
+    report["alignment"] = align_log
+    _write_renders(seq, frames, out_dir, stage1, job.renders)
+    return report
 
 
 def sequence_report(seq: Sequence, frames: list[str], logs: dict, faces: np.ndarray, out_dir: Path,

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from gg_core.diagnosis.confirm import Trial
-from gg_core.diagnosis.pipeline import confirmed, implausible, propose
+from gg_core.diagnosis.pipeline import confirmed, implausible, judge_reference, propose
 from gg_core.diagnosis.selection import Selection
 from gg_core.physics.cloth import Cloth
 
@@ -29,6 +29,18 @@ def test_confirmation_needs_the_heldout_gain_and_better_training_rollouts():
     assert not confirmed(Trial(["a"], 0.0080, 1.0, 0.0125), null, 0.10, 0.5)   # lucky on the held-out sequence only
     tiny = Trial([], 0.00022, 1.0, 0.0002)                              # the baseline already matches
     assert not confirmed(Trial(["a"], 0.00011, 1.0, 0.0001), tiny, 0.10, 0.5)   # 51 %, but 0.11 mm
+
+
+def test_trials_must_beat_the_better_of_the_baseline_fit_and_its_refit_on_both_rollouts():
+    baseline = Trial([], heldout_l2=0.00688, train_loss=float("nan"), train_l2=0.00740)
+    worse_refit = Trial([], heldout_l2=0.00841, train_loss=1.0, train_l2=0.00759)   # the refit lost held-out
+    ref = judge_reference(baseline, worse_refit)
+    assert (ref.heldout_l2, ref.train_l2, ref.train_loss) == (0.00688, 0.00740, 1.0)
+    drag = Trial(["air_drag"], 0.00716, 1.0, 0.00702)                 # 14.8 % better than the refit alone
+    assert confirmed(drag, worse_refit, 0.10, 0.5) and not confirmed(drag, ref, 0.10, 0.5)
+    better_refit = Trial([], heldout_l2=0.0060, train_loss=1.0, train_l2=0.0080)
+    mixed = judge_reference(baseline, better_refit)                   # each rollout's better fit
+    assert (mixed.heldout_l2, mixed.train_l2) == (0.0060, 0.00740)
 
 
 @pytest.fixture(scope="module")

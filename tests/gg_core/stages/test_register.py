@@ -100,3 +100,23 @@ def test_a_coarsened_texture_is_refitted_on_the_template_frame(tiny_capture, sta
     assert log["rgb_loss_after"] < 0.9 * log["rgb_loss_before"]     # measured: 0.0090 -> 0.0073
     again, log_again = registration_texture(capture, project, loaded, factor=2, refit=30)
     assert log_again["reused"] and torch.equal(again.params, refitted.params)
+
+
+def test_sequences_registered_in_parallel_workers_match_one_after_another(tiny_capture, stage1, tmp_path_factory):
+    """Two sequences in two single-threaded worker processes give the meshes that one process gives registering
+    them one after another (up to float summation order), and the report says how many workers ran."""
+    meshes, reports = {}, {}
+    for workers in (1, 2):
+        project = tmp_path_factory.mktemp("register") / f"workers{workers}"
+        _copy_stage1(stage1, project)
+        path = run_register(RegisterRequest(capture=tiny_capture, project=project, frames=2, iterations=10,
+                                            sequences=["00_walk", "01_arm_swing"], renders=0, workers=workers,
+                                            progress="none"))
+        reports[workers] = json.loads(path.read_text())
+        meshes[workers] = {seq: [read_mesh(project / "stage2" / seq / "meshes" / f"{k:06d}.ply")[0]
+                                 for k in range(2)] for seq in ("00_walk", "01_arm_swing")}
+    assert reports[1]["workers"] == 1 and reports[2]["workers"] == 2
+    assert list(reports[2]["sequences"]) == ["00_walk", "01_arm_swing"] and reports[2]["mean"]["wall_s_per_frame"] > 0
+    for seq, frames in meshes[1].items():
+        for one, two in zip(frames, meshes[2][seq]):
+            assert np.abs(one - two).max() < 1e-3       # metres (measured on the dev machine: identical)

@@ -1,0 +1,92 @@
+"""Independent jobs in single-threaded worker processes, their progress funnelled into one `Progress`.
+
+Why processes with one thread each: the stages' inner loops are many small torch ops between numba rasterizer
+calls, which a second thread in the same process slows down. Measured on the 2-core development machine, demo
+capture walk, frames 1-9 registered: 17.3-18.0 s per frame with one thread, 18.9-20.0 s with two (and 96 s of
+system time in spin-waits). Independent sequences in separate processes use every core instead.
+
+Jobs run in `spawn`ed processes (no forked torch or numba state); a worker reports progress by
+`step(message, advance)`, which puts it on a queue the parent drains into its `Progress`. Cancelling the add-on's
+job kills the whole process group, workers included (blender_addon/jobs.py).
+"""
+from __future__ import annotations
+
+import multiprocessing
+import os
+import queue
+import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from typing import Callable, Sequence, TypeVar
+
+from .jobs import Progress
+
+J = TypeVar("J")
+R = TypeVar("R")
+Step = Callable[..., None]            # step(message: str = "", advance: int = 1)
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
+_POLL_S = 0.2
+_GRACE_S = 2.0                         # s the queue must stay quiet after a worker died
+_queue = None                         # the worker's progress queue (set by _init_worker)
+
+
+def default_workers(jobs: int) -> int:
+    """One worker per job, at most one per core."""
+    return max(1, min(jobs, os.cpu_count() or 1))
+
+
+def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progress: Progress) -> list[R]:
+    """[fn(job, step) for job in jobs], in `workers` processes (in this process, one after another, for one
+    worker or one job). `fn` and the jobs must pickle. A failing job's exception is raised here once the other
+    jobs have finished, so what they write is kept (the stages resume from it)."""
+    if workers <= 1 or len(jobs) <= 1:
+        return [fn(job, progress.step) for job in jobs]
+    ctx = multiprocessing.get_context("spawn")
+    messages = ctx.Queue()
+    with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=ctx, initializer=_init_worker,
+                             initargs=(messages,)) as pool:
+        futures = [pool.submit(_run, fn, job) for job in jobs]
+        _relay(messages, futures, progress)
+        return [f.result() for f in futures]
+
+
+def _relay(messages, futures: list[Future], progress: Progress) -> None:
+    """Pass the workers' steps on until every job has said it ended (a job's messages come before its end, on
+    the same queue), or, should a worker die without saying so, its future failed and the queue stayed quiet."""
+    ended, quiet_since = 0, None
+    while ended < len(futures):
+        try:
+            item = messages.get(timeout=_POLL_S)
+        except queue.Empty:
+            if not all(f.done() for f in futures):
+                continue
+            quiet_since = quiet_since or time.monotonic()
+            if time.monotonic() - quiet_since > _GRACE_S:
+                return
+            continue
+        if item is None:
+            ended += 1
+        else:
+            progress.step(*item)
+
+
+def _init_worker(messages) -> None:
+    global _queue
+    _queue = messages
+    for name in THREAD_VARIABLES:
+        os.environ[name] = "1"
+
+
+def _run(fn: Callable[[J, Step], R], job: J) -> R:
+    import numba  # noqa: PLC0415 - after _init_worker limited the threads
+    import torch  # noqa: PLC0415
+
+    torch.set_num_threads(1)
+    numba.set_num_threads(1)
+
+    def step(message: str = "", advance: int = 1) -> None:
+        _queue.put((message, advance))
+
+    try:
+        return fn(job, step)
+    finally:
+        _queue.put(None)          # this job ended: all its steps are on the queue before this
