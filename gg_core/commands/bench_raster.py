@@ -194,26 +194,41 @@ def _measure(scene: dict, weights, rasterize, runs: int) -> dict:
     K, w2c = camera_tensors(scene["K"], scene["w2c"], torch.float32)
     width, height = int(scene["width"]), int(scene["height"])
     bg = torch.as_tensor(np.asarray(scene["background"]), dtype=torch.float32)
+    screens = []
+
+    def forward() -> dict:
+        screens[:] = [project(Gaussians(**params), K, w2c, width, height)]
+        screens[0].colors.retain_grad()
+        return rasterize(screens[0], width, height, bg)
+
+    timings, out = _time_runs(params, runs, forward, lambda o: (o["image"] * weights).sum(), lambda: None)
+    grads = {k: p.grad.numpy() for k, p in params.items()}
+    grads["colors"] = screens[0].colors.grad.numpy()  # per-Gaussian RGB (after SH evaluation for SH input)
+    return {**timings, "image": out["image"].detach().numpy(), "alpha": out["alpha"].detach().numpy(),
+            "grads": grads}
+
+
+def _time_runs(params: dict, runs: int, forward, loss, sync) -> tuple[dict, dict]:
+    """(median forward and backward ms over `runs` calls after a first one reported apart, which compiles or
+    loads kernels; the last outputs). `sync` waits for the device before each clock reading."""
     fwd, bwd = [], []
-    for i in range(runs + 1):  # the first call compiles / loads kernels and is reported apart
+    for i in range(runs + 1):
         for p in params.values():
             p.grad = None
+        sync()
         t0 = time.perf_counter()
-        screen = project(Gaussians(**params), K, w2c, width, height)
-        screen.colors.retain_grad()
-        out = rasterize(screen, width, height, bg)
+        out = forward()
+        sync()
         t1 = time.perf_counter()
-        (out["image"] * weights).sum().backward()
+        loss(out).backward()
+        sync()
         t2 = time.perf_counter()
         if i == 0:
             first_ms = 1e3 * (t2 - t0)
         else:
             fwd.append(1e3 * (t1 - t0))
             bwd.append(1e3 * (t2 - t1))
-    grads = {k: p.grad.numpy() for k, p in params.items()}
-    grads["colors"] = screen.colors.grad.numpy()  # per-Gaussian RGB (after SH evaluation for SH input)
-    return {"forward_ms": statistics.median(fwd), "backward_ms": statistics.median(bwd), "first_ms": first_ms,
-            "image": out["image"].detach().numpy(), "alpha": out["alpha"].detach().numpy(), "grads": grads}
+    return {"forward_ms": statistics.median(fwd), "backward_ms": statistics.median(bwd), "first_ms": first_ms}, out
 
 
 def _gsplat_figures(scene: dict, weights, runs: int, cpu: dict) -> dict:
@@ -235,31 +250,15 @@ def _gsplat_figures(scene: dict, weights, runs: int, cpu: dict) -> dict:
     w2c = np.asarray(scene["w2c"], float)
     camera = Camera("bench", np.asarray(scene["K"], float), w2c[:3, :3], w2c[:3, 3], width, height)
     bg, w = torch.as_tensor(np.asarray(scene["background"]), dtype=torch.float32, device="cuda"), weights.cuda()
-    fwd, bwd = [], []
-    for i in range(runs + 1):
-        for p in params.values():
-            p.grad = None
-        torch.cuda.synchronize()
-        t0 = time.perf_counter()
-        out = render(Gaussians(**params), camera, bg, backend="gsplat")
-        torch.cuda.synchronize()
-        t1 = time.perf_counter()
-        (out["image"] * w).sum().backward()
-        torch.cuda.synchronize()
-        t2 = time.perf_counter()
-        if i == 0:
-            first_ms = 1e3 * (t2 - t0)
-        else:
-            fwd.append(1e3 * (t1 - t0))
-            bwd.append(1e3 * (t2 - t1))
-    m = {"forward_ms": statistics.median(fwd), "backward_ms": statistics.median(bwd)}
+    m, out = _time_runs(params, runs, lambda: render(Gaussians(**params), camera, bg, backend="gsplat"),
+                        lambda o: (o["image"] * w).sum(), torch.cuda.synchronize)
     image = out["image"].detach().cpu().numpy()
     grad_means = params["means"].grad.cpu().numpy().ravel()
     cpu_means = cpu["grads"]["means"].ravel()
     cosine = float(grad_means @ cpu_means / max(np.linalg.norm(grad_means) * np.linalg.norm(cpu_means), 1e-30))
     return {"available": True, "device": torch.cuda.get_device_name(),
             **_figures(m, len(scene["means"]) * width * height),
-            "first_call_ms": round(first_ms, 1),
+            "first_call_ms": round(m["first_ms"], 1),
             "speedup_vs_cpu": round((cpu["forward_ms"] + cpu["backward_ms"]) / (m["forward_ms"] + m["backward_ms"]), 2),
             "max_abs_image_diff_vs_cpu": float(np.abs(image - cpu["image"]).max()),
             "mean_abs_image_diff_vs_cpu": float(np.abs(image - cpu["image"]).mean()),

@@ -1,12 +1,13 @@
 """`gg bench register`: the paper's Table 1 (registration ablations) on a synthetic capture.
 
-Runs stage 1 (gg template) once, then stage 2 (gg register) four times: full, only-rgb (no geometric terms),
-no-body (no collision term) and body-always (collision term from the first iteration), each into its own
-project folder holding a copy of the same stage 1 outputs. The ablations switch loss terms only: every one keeps
-the tracker's multi-view stereo step after each frame (registration/stereo.py), which is not a loss term. Prints
-one JSON line with, per ablation, the mean over sequences of CD (cm), p2m (cm), F-score@1cm (%), L_body and
-seconds per frame (wall and CPU), plus the paper's figures on 4D-Dress for reference; a readable table goes to
-stderr. Without --capture the tiny preset is synthesized.
+Runs stage 1 (gg template) once, then stage 2 (gg register) four times: full, only-rgb (no geometric
+terms), no-body (no collision term) and body-always (collision term from the first iteration), each into its
+own project folder holding a copy of the same stage 1 outputs, as many at once as there are cores (each in a
+single-threaded process: the seconds per frame are those of one core). The ablations switch loss terms only:
+every one keeps the tracker's multi-view stereo step after each frame (registration/stereo.py), which is not
+a loss term. Prints one JSON line with, per ablation, the mean over sequences of CD (cm), p2m (cm),
+F-score@1cm (%), L_body and seconds per frame (wall and CPU), plus the paper's figures on 4D-Dress for
+reference; a readable table goes to stderr. Without --capture the tiny preset is synthesized.
 """
 from __future__ import annotations
 
@@ -65,20 +66,33 @@ def synthesize_tiny(out: Path) -> Path:
 
 
 def run_ablations(capture: Path, work: Path, ablations: list[str], sequences: list[str], frames: int | None,
-                  iterations: int | None, vertices: int | None = None) -> dict[str, dict]:
-    from ..stages.register import RegisterRequest, run_register  # noqa: PLC0415
+                  iterations: int | None, vertices: int | None = None, workers: int | None = None
+                  ) -> dict[str, dict]:
+    """Stage 1 once, then the ablations at once, one single-threaded process each (gg_core/parallel.py)."""
+    from ..jobs import Progress  # noqa: PLC0415
+    from ..parallel import default_workers, run_jobs  # noqa: PLC0415
+    from ..stages.register import RegisterRequest  # noqa: PLC0415
     from ..stages.template import TemplateRequest, run_template  # noqa: PLC0415
 
     template_project = work / "template"
     run_template(TemplateRequest(capture=capture, project=template_project, vertices=vertices, progress="none"))
-    table = {}
+    requests = []
     for name in ablations:
-        project = work / name
-        _copy_stage1(template_project, project)
-        report = run_register(RegisterRequest(capture=capture, project=project, sequences=sequences, ablation=name,
-                                              iterations=iterations, frames=frames, renders=0, progress="none"))
-        table[name] = json.loads(report.read_text())["mean"]
-    return table
+        _copy_stage1(template_project, work / name)
+        requests.append(RegisterRequest(capture=capture, project=work / name, sequences=sequences, ablation=name,
+                                        iterations=iterations, frames=frames, renders=0, workers=1,
+                                        progress="none"))
+    means = run_jobs(_register_mean, requests, workers or default_workers(len(requests)),
+                     Progress("bench register", len(requests), "none"))
+    return dict(zip(ablations, means))
+
+
+def _register_mean(req, step) -> dict:
+    from ..stages.register import run_register  # noqa: PLC0415
+
+    mean = json.loads(run_register(req).read_text())["mean"]
+    step(req.ablation)
+    return mean
 
 
 def _copy_stage1(source: Path, project: Path) -> None:

@@ -1,14 +1,13 @@
 """The GPU backend: gsplat's CUDA rasterizer (gsplat 1.5 `gsplat.rasterization`) behind `render`.
 
-CI has no GPU, so its tests run only where CUDA and gsplat are present; on an H200 (2026-11-26,
-gsplat 1.5.3 JIT-built against torch 2.11+cu130) they pass, and `gg bench raster` measured the
-16k-Gaussian 512x512 scene's forward+backward in 1.9 ms against 45 ms for the numba backend on 16
-cores. Colour is evaluated from SH by this package (gaussians.sh, same basis as gsplat) so both
-backends shade identically. gsplat works in float32 and has its own per-pixel cut-off (every pixel
-of the Gaussian's tiles where alpha >= 1/255, radius from its own rule), so it matches the CPU
-backend except in the faint tails near the 3-sigma boundary (bench scene: mean absolute image
-difference 7.6e-4, largest 0.027 in single pixels, means-gradient cosine 0.9999); it ignores
-intrinsic skew, which is therefore refused.
+CI has no GPU, so its tests run only where CUDA and gsplat are present; on an H200 (2026-11-26, gsplat 1.5.3
+JIT-built against torch 2.11+cu130) they pass, and `gg bench raster` measured the 16k-Gaussian 512x512 scene's
+forward+backward in 1.1-1.9 ms (two fresh machines) against 45 ms for the numba backend on 16 cores. Colour is
+evaluated from SH by this package (gaussians.sh, same basis as gsplat) so both backends shade identically.
+gsplat works in float32 and has its own per-pixel cut-off (every pixel of the Gaussian's tiles where alpha >=
+1/255, radius from its own rule), so it matches the CPU backend except in the faint tails near the 3-sigma
+boundary (bench scene: mean absolute image difference 7.6e-4, largest 0.027 in single pixels, means-gradient
+cosine 0.9999); it ignores intrinsic skew, which is therefore refused.
 """
 from __future__ import annotations
 
