@@ -66,8 +66,7 @@ def synthesize_tiny(out: Path) -> Path:
 
 
 def run_ablations(capture: Path, work: Path, ablations: list[str], sequences: list[str], frames: int | None,
-                  iterations: int | None, vertices: int | None = None, workers: int | None = None
-                  ) -> dict[str, dict]:
+                  iterations: int | None, vertices: int | None = None) -> dict[str, dict]:
     """Stage 1 once, then the ablations at once, one single-threaded process each (gg_core/parallel.py)."""
     from ..jobs import Progress  # noqa: PLC0415
     from ..parallel import default_workers, run_jobs  # noqa: PLC0415
@@ -82,7 +81,7 @@ def run_ablations(capture: Path, work: Path, ablations: list[str], sequences: li
         requests.append(RegisterRequest(capture=capture, project=work / name, sequences=sequences, ablation=name,
                                         iterations=iterations, frames=frames, renders=0, workers=1,
                                         progress="none"))
-    means = run_jobs(_register_mean, requests, workers or default_workers(len(requests)),
+    means = run_jobs(_register_mean, requests, default_workers(len(requests)),
                      Progress("bench register", len(requests), "none"))
     return dict(zip(ablations, means))
 

@@ -285,7 +285,8 @@ def run_register(req: RegisterRequest) -> Path:
     progress.step(f"registration texture: 1/{factor} resolution" + (
         f", refitted: L_rgb {refit_log['rgb_loss_before']:.4f} -> {refit_log['rgb_loss_after']:.4f}"
         if refit_log["steps"] else ""))
-    jobs = [SequenceJob(req.capture, project, s.name, frames_of[s.name], texture.state(), config, options, req.align,
+    state = texture.state()
+    jobs = [SequenceJob(req.capture, project, s.name, frames_of[s.name], state, config, options, req.align,
                         req.icp_scale, req.renders) for s in seqs]
     workers = req.workers if req.workers is not None else default_workers(len(jobs))
     tracking = time.perf_counter()
