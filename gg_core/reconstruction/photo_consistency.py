@@ -77,7 +77,6 @@ from .mesh_graph import adjacency, smooth, vertex_normals
 from .visual_hull import bilinear
 
 _VERTEX_CHUNK = 1024
-HOLD_WEIGHT = 1e3     # data weight of a held vertex's zero offset (confidences are at most 1)
 
 
 @dataclass
@@ -179,10 +178,8 @@ def _best_pairs(colours: dict[int, np.ndarray], seen: np.ndarray, d: int, share:
 
 def refine_along_normals(verts: np.ndarray, faces: np.ndarray, cameras: Sequence[Camera],
                          images: Sequence[np.ndarray], occluder: RayCaster, spacing: float,
-                         options: PhotoOptions | None = None, hold: np.ndarray | None = None
-                         ) -> tuple[np.ndarray, dict]:
-    """(moved verts, log). `spacing` (m) is the patch sample spacing and the sweep step, about one pixel; vertices
-    where `hold` ([V] bool) is set stay where they are, their neighbours blend smoothly into them."""
+                         options: PhotoOptions | None = None) -> tuple[np.ndarray, dict]:
+    """(moved verts, log). `spacing` (m) is the patch sample spacing and the sweep step, about one pixel."""
     opt = options or PhotoOptions()
     verts = np.asarray(verts, np.float64).copy()
     faces = np.asarray(faces, np.int64)
@@ -207,13 +204,11 @@ def refine_along_normals(verts: np.ndarray, faces: np.ndarray, cameras: Sequence
         target = offsets[best] + step * _parabola_peak(agg, best)
         confidence = np.where(weight > 0.5, np.max(agg, axis=1), 0.0)
         w = np.where(confidence > opt.min_score, confidence, 0.0)
-        if hold is not None:
-            w, target = np.where(hold, HOLD_WEIGHT, w), np.where(hold, 0.0, target)
         system = (sp.diags(w) + opt.stiffness * lap + sp.identity(len(verts)) * 1e-6).tocsc()
         move = sp.linalg.spsolve(system, w * target)
         verts += move[:, None] * normals
         total_offset += move
-        confident = (w > 0) if hold is None else (w > 0) & ~hold
+        confident = w > 0
         log["rounds"].append({"search_m": [float(lo), float(hi)], "confident_vertices": int(confident.sum()),
                               "mean_score": float(np.mean(confidence[confident])) if confident.any() else 0.0,
                               "mean_move_m": float(np.abs(move).mean())})

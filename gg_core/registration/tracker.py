@@ -93,10 +93,9 @@ class TrackerConfig:
     visibility_every: int = 25         # iterations between Gaussian visibility updates per view
     stop_motion: float = 0.0           # early stop: mean vertex step (m) per iteration below this ...
     stop_patience: int = 20            # ... for this many iterations in the fine phase (0 m: never stop early)
-    stereo_rounds: int = 2             # photo-consistency rounds after each frame's fit (stereo.py; 0: none) ...
+    stereo_rounds: int = 3             # photo-consistency rounds after each frame's fit (stereo.py; 0: none) ...
     stereo_search: float = 0.02        # ... searching this far (m) along the normals either way ...
-    stereo_hold_rings: int = 2         # ... with the border's rings held ...
-    stereo_body_gap: float = 0.005     # ... and the vertices closer than this (m) to the body
+    stereo_stiffness: float = 1.0      # ... with an offset field this stiff (the template's: 2)
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -238,9 +237,8 @@ class Tracker:
         fitted = x.detach().double()
         final, stereo = fitted, None
         if cfg.stereo_rounds > 0:
-            near_body = (_depth(fitted, body.contacts(fitted), cfg.stereo_body_gap) > 0).numpy()
             moved, stereo = stereo_refine(fitted.numpy(), self.faces, views, (body_verts, self.collider.faces),
-                                          cfg.stereo_search, cfg.stereo_rounds, cfg.stereo_hold_rings, near_body)
+                                          cfg.stereo_search, cfg.stereo_rounds, cfg.stereo_stiffness)
             final = _pushed_out(torch.from_numpy(moved), body) if cfg.w_body > 0 else torch.from_numpy(moved)
         log = {"iterations": it + 1, "seconds": time.perf_counter() - start,
                "cpu_seconds": time.process_time() - cpu_start, "stereo": stereo,

@@ -105,19 +105,20 @@ def test_virtual_edges_act_on_a_sequence_first_frame_only_unless_asked(sheet_sce
 
 def test_stereo_step_refines_the_fit_when_switched_on(sheet_scene, monkeypatch):
     # the step itself is tested on a textured plane (test_stereo.py); here: the tracker hands it the fitted mesh,
-    # the frame's views and body, its settings and the body contacts to hold, and returns what it returns
+    # the frame's views and body and its settings, and returns what it returns
     calls = []
 
-    def fake(verts, faces, views, body, search, rounds, hold_rings, hold):
-        calls.append((search, rounds, hold_rings, hold.dtype, hold.shape, len(views), body[1].shape))
+    def fake(verts, faces, views, body, search, rounds, stiffness):
+        calls.append((search, rounds, stiffness, verts.shape, len(views), body[1].shape))
         return verts + [0.0, 0.0, 0.001], {"rounds": [{}] * rounds}
 
     monkeypatch.setattr(tracker_module, "stereo_refine", fake)
     off = fit(sheet_scene, sheet_scene.verts, TrackerConfig(lr=1e-12, coarse_scale=1.0, w_body=0.0, stereo_rounds=0), 2)
     assert not calls and off.log["stereo"] is None
-    config = TrackerConfig(lr=1e-12, coarse_scale=1.0, w_body=0.0, stereo_rounds=2, stereo_search=0.01)
+    config = TrackerConfig(lr=1e-12, coarse_scale=1.0, w_body=0.0, stereo_rounds=2, stereo_search=0.01,
+                           stereo_stiffness=0.5)
     on = fit(sheet_scene, sheet_scene.verts, config, 2)
-    assert calls == [(0.01, 2, config.stereo_hold_rings, np.dtype(bool), (len(sheet_scene.verts),), 4, (1, 3))]
+    assert calls == [(0.01, 2, 0.5, (len(sheet_scene.verts), 3), 4, (1, 3))]
     np.testing.assert_allclose(on.verts - off.verts, np.tile([0.0, 0.0, 0.001], (len(on.verts), 1)), atol=1e-6)
     assert len(on.log["stereo"]["rounds"]) == 2
     # the next frame starts from the photometric fit, not from the refined output
