@@ -62,6 +62,17 @@ plane of their border loop (so they keep their height) and blending that over 1 
 0.553 m and the lowest band's recall rises (50 -> 56 %), but the restored strip lies on the hull outside the hem's
 folds, so F@1cm falls 85.4 -> 84.5 % and CD rises 0.596 -> 0.623 cm: the raised hem scores better by leaving that
 strip out. Normals taken from two rings further in changed nothing (hem 0.568 m).
+
+Curved patches (2026-11-26, session 11). The reconstruction was too smooth: on a registered demo frame (walk frame
+15) the signed error along the normal follows the true surface's curvature (Spearman -0.53 against the truth's
+2 cm-scale curvature): fold crests cut about 3 mm short, valleys about 2.5 mm shallow, the crests' error twice the
+rest. A tangent-plane patch leaves a curved surface on both sides and matches best inside a crest (the test's 3 cm
+cylinder: 1.4 mm too deep). So each round bends the patches to the local quadric of the current mesh (least squares
+over the 2-ring; local_quadrics), which carries some of the folds (its 2 cm-scale curvature correlates 0.45 with the
+truth's, at 40 % of the amplitude) and recovers more of them round after round. Template CD / p2m / F@1cm, 00_walk
+frame 0 of the three captures (seeds 0, 3, 5): 0.441 -> 0.425 / 0.374 -> 0.360 / 91.0 -> 91.2 %, 0.442 -> 0.431 /
+0.380 -> 0.372 / 90.7 -> 91.1 %, 0.427 -> 0.411 / 0.358 -> 0.346 / 91.6 -> 92.1 %. The registration's stereo step
+(registration/stereo.py) gains more, starting closer to the cloth.
 """
 from __future__ import annotations
 
@@ -92,6 +103,7 @@ class PhotoOptions:
     stiffness: float = 2.0       # weight of the offset field's smoothness (graph Laplacian; module docstring)
     rounds: int = 3              # later rounds search a third of the previous range around the last result
     pair_share: float = 0.5      # each depth scored by the better half of the camera pairs (module docstring)
+    curved: bool = True          # patches bent to the mesh's local quadric (module docstring); False: tangent plane
 
 
 def visible_cameras(verts: np.ndarray, normals: np.ndarray, cameras: Sequence[Camera], occluder: RayCaster,
@@ -119,9 +131,32 @@ def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t1, np.cross(normals, t1)
 
 
+def local_quadrics(verts: np.ndarray, normals: np.ndarray, adj: sp.csr_matrix) -> np.ndarray:
+    """[V, 3] (A, B, C) of the height h = (A a^2 + 2 B a b + C b^2) / 2 over each vertex's tangent frame
+    (tangent_frames) that fits its 2-ring neighbours best in least squares (zero where they do not determine it)."""
+    ring2 = ((adj + adj @ adj) > 0).tocoo()
+    i, j = ring2.row, ring2.col
+    keep = i != j
+    i, j = i[keep], j[keep]
+    t1, t2 = tangent_frames(normals)
+    d = verts[j] - verts[i]
+    a, b, h = (np.einsum("ij,ij->i", d, t[i]) for t in (t1, t2, normals))
+    basis = np.stack([0.5 * a * a, a * b, 0.5 * b * b], axis=1)          # [P, 3]
+    n = len(verts)
+    normal_eq = np.zeros((n, 3, 3))
+    np.add.at(normal_eq, i, basis[:, :, None] * basis[:, None, :])
+    rhs = np.zeros((n, 3))
+    np.add.at(rhs, i, basis * h[:, None])
+    ok = np.linalg.det(normal_eq) > 1e-12 * np.maximum(np.einsum("nii->n", normal_eq), 1e-300) ** 3
+    out = np.zeros((n, 3))
+    out[ok] = np.linalg.solve(normal_eq[ok], rhs[ok][:, :, None])[:, :, 0]
+    return out
+
+
 def sweep_scores(verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, seen: np.ndarray,
                  cameras: Sequence[Camera], images: Sequence[np.ndarray], spacing: float, patch: int,
-                 pair_share: float = 1.0, sigma: float | None = None) -> np.ndarray:
+                 pair_share: float = 1.0, sigma: float | None = None, quadrics: np.ndarray | None = None
+                 ) -> np.ndarray:
     """[V, D] NCC of the patch at verts + offset * normal: at each depth the mean over the best `pair_share` of
     the pairs of seeing cameras (1.0: all pairs; NaN when fewer than two cameras see the vertex). Each colour
     channel is centred on its own (weighted) mean; `sigma` (in samples) weights the patch by a Gaussian around
@@ -138,6 +173,10 @@ def sweep_scores(verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, se
         # [n, D, P, 3] sample points: centre moved along the normal, patch in the tangent plane
         centre = verts[sl, None, :] + offsets[None, :, None] * normals[sl, None, :]
         spread = a[None, :, None] * t1[sl, None, :] + b[None, :, None] * t2[sl, None, :]
+        if quadrics is not None:
+            q = quadrics[sl]
+            height = 0.5 * q[:, :1] * a * a + q[:, 1:2] * a * b + 0.5 * q[:, 2:] * b * b     # [n, P]
+            spread = spread + height[:, :, None] * normals[sl, None, :]
         points = centre[:, :, None, :] + spread[:, None, :, :]
         n, d, p = points.shape[:3]
         colours: dict[int, np.ndarray] = {}       # camera -> [n, D, P*3] zero-mean unit patches (zero where unseen)
@@ -193,8 +232,9 @@ def refine_along_normals(verts: np.ndarray, faces: np.ndarray, cameras: Sequence
     total_offset = np.zeros(len(verts))
     for _ in range(opt.rounds):
         offsets = np.arange(lo, hi + 0.5 * step, step)
+        quadrics = local_quadrics(verts, normals, adj) if opt.curved else None
         scores = sweep_scores(verts, normals, offsets, seen, cameras, images, opt.patch_spacing * spacing,
-                              opt.patch, opt.pair_share, opt.patch_sigma)
+                              opt.patch, opt.pair_share, opt.patch_sigma, quadrics)
         valid = np.isfinite(scores[:, 0])
         filled = np.where(valid[:, None], scores, 0.0)
         agg = np.stack([smooth(filled[:, k], adj, opt.aggregate) for k in range(len(offsets))], axis=1)

@@ -19,8 +19,14 @@ in its frame, and holding costs more than it saves. On the stored photometric fi
 - nothing held: 0.389 / 0.348 / 93.6 % and 0.403 / 0.354 / 93.1 % (the hem's rings follow the cameras too);
 - then a softer offset field, stiffness 4 / 2 / 1 / 0.5: walk 0.401 / 0.389 / 0.382 / 0.379 cm (F 93.1 / 93.6 /
   94.0 / 94.0 %), twist 0.417 / 0.403 / 0.393 / 0.386 cm; 3 rounds instead of 2 at stiffness 1: 0.377 / 0.340 /
-  94.1 % and 0.389 / 0.345 / 93.6 %. Not better: a 3 cm or 1.5 cm search, cameras within 73 degrees, one or three
-  neighbour-averaging steps, the step run twice.
+  94.1 % and 0.389 / 0.345 / 93.6 %; no neighbour averaging of the score curves: 0.373 / 0.384 cm. Not better: a 3
+  or 1.5 cm search, cameras within 73 degrees, the step run twice, smaller patches (3 samples, 0.7 pixels apart);
+- then patches bent to the mesh's local quadric (photo_consistency.local_quadrics): 0.360 / 0.329 / 94.5 % and
+  0.366 / 0.330 / 94.3 %; without averaging the score curves over neighbours (the template's 2 steps):
+  0.356 / 0.325 / 94.6 % and 0.363 / 0.328 / 94.4 % (the default). Not kept: 4 rounds (0.354 / 0.323 / 94.7 % on the
+  walk, a third more time), wider patches (7 samples, sigma 1.5: 0.361 cm), the step run twice (0.366 cm); earlier,
+  planar patches: each sweep started from the fit plus half / all of the previous frame's correction (walk frames
+  1-8: mean CD 0.366 -> 0.367 / 0.372 cm).
 
 Earlier, fed back, with the border's 2 rings held (demo walk, frames 0-9 from the 0.441 cm template, CD of frames
 0 / 4 / 9, mean, F@1cm): photometric fit alone 0.441 / 0.510 / 0.548, mean 0.502 (89.0 %), the drift; nothing held:
@@ -47,11 +53,11 @@ from .views import View
 
 
 def stereo_refine(verts: np.ndarray, faces: np.ndarray, views: Sequence[View], body: tuple[np.ndarray, np.ndarray],
-                  search: float, rounds: int, stiffness: float) -> tuple[np.ndarray, dict]:
+                  search: float, rounds: int, stiffness: float, aggregate: int) -> tuple[np.ndarray, dict]:
     """(verts moved along their normals to where the cameras agree, within `search` metres either way, the offset
-    field as stiff as `stiffness`; log)."""
+    field as stiff as `stiffness`, score curves averaged over `aggregate` neighbour steps; log)."""
     cameras = [v.camera for v in views]
-    options = PhotoOptions(search_in=search, search_out=search, rounds=rounds, stiffness=stiffness)
+    options = PhotoOptions(search_in=search, search_out=search, rounds=rounds, stiffness=stiffness, aggregate=aggregate)
     occluder = RayCaster([(verts, faces), body])
     return refine_along_normals(verts, faces, cameras, [v.rgb.numpy() for v in views], occluder,
                                 pixel_footprint(cameras, verts.mean(axis=0)), options)

@@ -95,7 +95,8 @@ class TrackerConfig:
     stop_patience: int = 20            # ... for this many iterations in the fine phase (0 m: never stop early)
     stereo_rounds: int = 3             # photo-consistency rounds after each frame's fit (stereo.py; 0: none) ...
     stereo_search: float = 0.02        # ... searching this far (m) along the normals either way ...
-    stereo_stiffness: float = 1.0      # ... with an offset field this stiff (the template's: 2)
+    stereo_stiffness: float = 1.0      # ... with an offset field this stiff (the template's: 2) ...
+    stereo_aggregate: int = 0          # ... and score curves averaged over this many neighbour steps (template: 2)
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -238,7 +239,8 @@ class Tracker:
         final, stereo = fitted, None
         if cfg.stereo_rounds > 0:
             moved, stereo = stereo_refine(fitted.numpy(), self.faces, views, (body_verts, self.collider.faces),
-                                          cfg.stereo_search, cfg.stereo_rounds, cfg.stereo_stiffness)
+                                          cfg.stereo_search, cfg.stereo_rounds, cfg.stereo_stiffness,
+                                          cfg.stereo_aggregate)
             final = _pushed_out(torch.from_numpy(moved), body) if cfg.w_body > 0 else torch.from_numpy(moved)
         log = {"iterations": it + 1, "seconds": time.perf_counter() - start,
                "cpu_seconds": time.process_time() - cpu_start, "stereo": stereo,

@@ -55,3 +55,16 @@ def plane_image(cam: Camera) -> np.ndarray:
     t = -origin[2] / d[:, 2]
     hit = origin + t[:, None] * d
     return plane_texture(hit[:, 0], hit[:, 1]).reshape(cam.height, cam.width, 3)
+
+
+def cylinder_image(cam: Camera, radius: float, background: float = 0.2) -> np.ndarray:
+    """[H, W, 3] image of the textured cylinder x^2 + z^2 = radius^2 around the y axis, seen from the +z side
+    (plane_texture over arc length and height, so the texture is undistorted on the surface)."""
+    origin, d = pixel_rays(cam)
+    a = d[:, 0] ** 2 + d[:, 2] ** 2
+    b = 2 * (origin[0] * d[:, 0] + origin[2] * d[:, 2])
+    disc = b * b - 4 * a * (origin[0] ** 2 + origin[2] ** 2 - radius ** 2)
+    hit = origin + ((-b - np.sqrt(np.maximum(disc, 0.0))) / (2 * a))[:, None] * d
+    image = plane_texture(radius * np.arctan2(hit[:, 0], hit[:, 2]), hit[:, 1])
+    image[disc < 0] = background
+    return image.reshape(cam.height, cam.width, 3)

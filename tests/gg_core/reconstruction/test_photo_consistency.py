@@ -1,11 +1,11 @@
 import numpy as np
 
 from gg_core.geometry.raycast import RayCaster
-from gg_core.reconstruction.photo_consistency import (PhotoOptions, refine_along_normals, sweep_scores,
-                                                      visible_cameras)
-from gg_core.reconstruction.mesh_graph import vertex_normals
+from gg_core.reconstruction.photo_consistency import (PhotoOptions, local_quadrics, refine_along_normals,
+                                                      sweep_scores, tangent_frames, visible_cameras)
+from gg_core.reconstruction.mesh_graph import adjacency, vertex_normals
 
-from .scenes import plane_image
+from .scenes import cylinder_image, plane_image, sphere_mesh
 
 
 def _plane(n: int, size: float, z: float) -> tuple[np.ndarray, np.ndarray]:
@@ -57,6 +57,39 @@ def test_best_camera_pairs_ignore_a_camera_that_sees_something_else():
     # a vertex seen by one camera has no pair to score it
     seen[1:, 0] = False
     assert np.isnan(sweep_scores(verts, normals, offsets, seen, cams, images, 0.005, 5, 0.5)[0]).all()
+
+
+def test_local_quadrics_recover_the_curvature_of_a_sphere_and_a_plane():
+    verts, faces = sphere_mesh(0.1, subdivisions=4)
+    normals = vertex_normals(verts, faces)
+    normals *= np.sign(np.einsum("ij,ij->i", normals, verts))[:, None]      # outwards: the surface bends away
+    q = local_quadrics(verts, normals, adjacency(faces, len(verts)))
+    np.testing.assert_allclose(q[:, [0, 2]], -10.0, rtol=0.03)             # h = -(a^2 + b^2) / (2 R)
+    np.testing.assert_allclose(q[:, 1], 0.0, atol=0.3)
+    verts, faces = _plane(7, 0.3, 0.0)
+    q = local_quadrics(verts, vertex_normals(verts, faces), adjacency(faces, len(verts)))
+    np.testing.assert_allclose(q, 0.0, atol=1e-9)
+
+
+def test_curved_patches_find_a_crest_that_plane_patches_place_too_deep():
+    # a 3 cm cylinder's crest line, seen by five cameras: a tangent-plane patch leaves the surface on both sides
+    # and matches best a few millimetres inside; bent to the crest's curvature it matches on the surface
+    radius = 0.03
+    cams = _cameras()
+    images = [cylinder_image(c, radius) for c in cams]
+    ys = np.linspace(-0.05, 0.05, 11)
+    verts = np.stack([np.zeros_like(ys), ys, np.full_like(ys, radius)], axis=1)
+    normals = np.tile([0.0, 0.0, 1.0], (len(ys), 1))
+    t1, t2 = tangent_frames(normals)
+    across = np.abs(t2[0, 0]) > 0.99                     # which tangent axis runs around the cylinder
+    quadrics = np.tile([0.0, 0.0, -1 / radius] if across else [-1 / radius, 0.0, 0.0], (len(ys), 1))
+    offsets = np.arange(-0.01, 0.0100001, 0.0005)
+    seen = np.ones((len(cams), len(ys)), bool)
+    peak = {}
+    for name, q in (("plane", None), ("curved", quadrics)):
+        scores = sweep_scores(verts, normals, offsets, seen, cams, images, 0.0076, 5, 1.0, 1.0, q)
+        peak[name] = offsets[np.argmax(scores, axis=1)].mean()
+    assert peak["plane"] < -0.001 and abs(peak["curved"]) < 0.4 * abs(peak["plane"])   # -1.4 mm and -0.4 mm
 
 
 def _offset_plane() -> tuple[np.ndarray, np.ndarray, dict]:
