@@ -155,12 +155,13 @@ def local_quadrics(verts: np.ndarray, normals: np.ndarray, adj: sp.csr_matrix) -
 
 def sweep_scores(verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, seen: np.ndarray,
                  cameras: Sequence[Camera], images: Sequence[np.ndarray], spacing: float, patch: int,
-                 pair_share: float = 1.0, sigma: float | None = None, quadrics: np.ndarray | None = None
-                 ) -> np.ndarray:
+                 pair_share: float = 1.0, sigma: float | None = None, quadrics: np.ndarray | None = None,
+                 masks: Sequence[np.ndarray] | None = None) -> np.ndarray:
     """[V, D] NCC of the patch at verts + offset * normal: at each depth the mean over the best `pair_share` of
     the pairs of seeing cameras (1.0: all pairs; NaN when fewer than two cameras see the vertex). Each colour
     channel is centred on its own (weighted) mean; `sigma` (in samples) weights the patch by a Gaussian around
-    its centre, None weighs it evenly."""
+    its centre, None weighs it evenly; `quadrics` (local_quadrics) bend the patch; `masks` ([H, W] per camera,
+    1 on the garment) weigh each camera's samples by whether they land on the garment."""
     t1, t2 = tangent_frames(normals)
     steps = np.arange(patch) - (patch - 1) / 2
     a, b = [g.ravel() * spacing for g in np.meshgrid(steps, steps, indexing="ij")]
@@ -186,8 +187,12 @@ def sweep_scores(verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, se
                 continue
             uv, _ = cam.project(points[idx].reshape(-1, 3))
             colour = bilinear(image, uv[:, 0], uv[:, 1]).reshape(len(idx), d, p, 3)
-            colour = colour - np.einsum("ndpc,p->ndc", colour, weight)[:, :, None, :]
-            colour = (colour * np.sqrt(weight)[:, None]).reshape(len(idx), d, p * 3)
+            w = np.broadcast_to(weight, (len(idx), d, p))
+            if masks is not None:
+                w = w * bilinear(masks[c], uv[:, 0], uv[:, 1]).reshape(len(idx), d, p)
+                w = w / np.maximum(w.sum(axis=2, keepdims=True), 1e-12)
+            colour = colour - np.einsum("ndpc,ndp->ndc", colour, w)[:, :, None, :]
+            colour = (colour * np.sqrt(w)[..., None]).reshape(len(idx), d, p * 3)
             colour /= np.maximum(np.linalg.norm(colour, axis=2, keepdims=True), 1e-6)
             colours[c] = np.zeros((n, d, p * 3), np.float32)
             colours[c][idx] = colour
@@ -217,8 +222,10 @@ def _best_pairs(colours: dict[int, np.ndarray], seen: np.ndarray, d: int, share:
 
 def refine_along_normals(verts: np.ndarray, faces: np.ndarray, cameras: Sequence[Camera],
                          images: Sequence[np.ndarray], occluder: RayCaster, spacing: float,
-                         options: PhotoOptions | None = None) -> tuple[np.ndarray, dict]:
-    """(moved verts, log). `spacing` (m) is the patch sample spacing and the sweep step, about one pixel."""
+                         options: PhotoOptions | None = None, masks: Sequence[np.ndarray] | None = None
+                         ) -> tuple[np.ndarray, dict]:
+    """(moved verts, log). `spacing` (m) is the patch sample spacing and the sweep step, about one pixel; `masks`
+    (the garment's, per camera) keep the patches' samples off the background (sweep_scores)."""
     opt = options or PhotoOptions()
     verts = np.asarray(verts, np.float64).copy()
     faces = np.asarray(faces, np.int64)
@@ -234,7 +241,7 @@ def refine_along_normals(verts: np.ndarray, faces: np.ndarray, cameras: Sequence
         offsets = np.arange(lo, hi + 0.5 * step, step)
         quadrics = local_quadrics(verts, normals, adj) if opt.curved else None
         scores = sweep_scores(verts, normals, offsets, seen, cameras, images, opt.patch_spacing * spacing,
-                              opt.patch, opt.pair_share, opt.patch_sigma, quadrics)
+                              opt.patch, opt.pair_share, opt.patch_sigma, quadrics, masks)
         valid = np.isfinite(scores[:, 0])
         filled = np.where(valid[:, None], scores, 0.0)
         agg = np.stack([smooth(filled[:, k], adj, opt.aggregate) for k in range(len(offsets))], axis=1)

@@ -26,7 +26,11 @@ in its frame, and holding costs more than it saves. On the stored photometric fi
   0.356 / 0.325 / 94.6 % and 0.363 / 0.328 / 94.4 % (the default). Not kept: 4 rounds (0.354 / 0.323 / 94.7 % on the
   walk, a third more time), wider patches (7 samples, sigma 1.5: 0.361 cm), the step run twice (0.366 cm); earlier,
   planar patches: each sweep started from the fit plus half / all of the previous frame's correction (walk frames
-  1-8: mean CD 0.366 -> 0.367 / 0.372 cm).
+  1-8: mean CD 0.366 -> 0.367 / 0.372 cm);
+- then each camera's patch samples weighted by the frame's garment mask (the background beyond the hem and the skin
+  above the waist kept out of the patches), from session 11's curved template's fits: 0.355 -> 0.352 / 0.328 ->
+  0.323 / 94.59 -> 94.63 % and 0.363 -> 0.361 / 0.329 -> 0.327 / 94.50 -> 94.52 %. (On the template, sweeping from
+  the hull, the masks do not help: CD 0.425 -> 0.425, 0.431 -> 0.432, 0.411 -> 0.419 cm on seeds 0, 3, 5.)
 
 Earlier, fed back, with the border's 2 rings held (demo walk, frames 0-9 from the 0.441 cm template, CD of frames
 0 / 4 / 9, mean, F@1cm): photometric fit alone 0.441 / 0.510 / 0.548, mean 0.502 (89.0 %), the drift; nothing held:
@@ -60,4 +64,5 @@ def stereo_refine(verts: np.ndarray, faces: np.ndarray, views: Sequence[View], b
     options = PhotoOptions(search_in=search, search_out=search, rounds=rounds, stiffness=stiffness, aggregate=aggregate)
     occluder = RayCaster([(verts, faces), body])
     return refine_along_normals(verts, faces, cameras, [v.rgb.numpy() for v in views], occluder,
-                                pixel_footprint(cameras, verts.mean(axis=0)), options)
+                                pixel_footprint(cameras, verts.mean(axis=0)), options,
+                                [v.garment.numpy() for v in views])

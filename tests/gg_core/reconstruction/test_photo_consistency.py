@@ -5,7 +5,7 @@ from gg_core.reconstruction.photo_consistency import (PhotoOptions, local_quadri
                                                       sweep_scores, tangent_frames, visible_cameras)
 from gg_core.reconstruction.mesh_graph import adjacency, vertex_normals
 
-from .scenes import cylinder_image, plane_image, sphere_mesh
+from .scenes import cylinder_image, pixel_rays, plane_image, sphere_mesh
 
 
 def _plane(n: int, size: float, z: float) -> tuple[np.ndarray, np.ndarray]:
@@ -90,6 +90,28 @@ def test_curved_patches_find_a_crest_that_plane_patches_place_too_deep():
         scores = sweep_scores(verts, normals, offsets, seen, cams, images, 0.0076, 5, 1.0, 1.0, q)
         peak[name] = offsets[np.argmax(scores, axis=1)].mean()
     assert peak["plane"] < -0.001 and abs(peak["curved"]) < 0.4 * abs(peak["plane"])   # -1.4 mm and -0.4 mm
+
+
+def test_masks_keep_the_background_out_of_patches_at_the_garment_edge():
+    # the cloth ends at x = 0; beyond it each camera sees its own background (noise), which the garment masks mark
+    cams = _cameras()
+    rng = np.random.default_rng(0)
+    images, masks = [], []
+    for cam in cams:
+        origin, d = pixel_rays(cam)
+        on_cloth = (origin[0] - origin[2] / d[:, 2] * d[:, 0] < 0.0).reshape(cam.height, cam.width)
+        noise = rng.uniform(0.3, 0.7, (cam.height, cam.width, 3))
+        images.append(np.where(on_cloth[..., None], plane_image(cam), noise))
+        masks.append(on_cloth.astype(np.float64))
+    ys = np.linspace(-0.04, 0.04, 9)
+    verts = np.stack([np.full_like(ys, -0.006), ys, np.zeros_like(ys)], axis=1)      # under a pixel from the edge
+    normals = np.tile([0.0, 0.0, 1.0], (len(ys), 1))
+    offsets = np.arange(-0.01, 0.0100001, 0.001)
+    seen = np.ones((len(cams), len(ys)), bool)
+    plain = sweep_scores(verts, normals, offsets, seen, cams, images, 0.0076, 5, 1.0, 1.0)
+    masked = sweep_scores(verts, normals, offsets, seen, cams, images, 0.0076, 5, 1.0, 1.0, masks=masks)
+    np.testing.assert_allclose(offsets[np.argmax(masked, axis=1)], 0.0, atol=0.0011)
+    assert masked.max(axis=1).min() > 0.9 and np.all(plain.max(axis=1) < masked.max(axis=1) - 0.05)
 
 
 def _offset_plane() -> tuple[np.ndarray, np.ndarray, dict]:
