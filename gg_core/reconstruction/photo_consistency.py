@@ -171,7 +171,7 @@ def sweep_scores(verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, se
     scores = np.full((len(verts), len(offsets)), np.nan)
     for s in range(0, len(verts), _VERTEX_CHUNK):
         sl = slice(s, s + _VERTEX_CHUNK)
-        # [n, D, P, 3] sample points: centre moved along the normal, patch in the tangent plane
+        # [n, D, P, 3] sample points: centre moved along the normal, patch in the tangent plane (or on the quadric)
         centre = verts[sl, None, :] + offsets[None, :, None] * normals[sl, None, :]
         spread = a[None, :, None] * t1[sl, None, :] + b[None, :, None] * t2[sl, None, :]
         if quadrics is not None:

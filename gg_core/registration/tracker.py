@@ -47,7 +47,8 @@ Adam with the mean square added to the denominator: 0.619 / 0.616 cm (lr 2e-3 / 
 2500-step texture: 0.557 cm, the same as without, so pose-dependent shading is at most a small part of the drift.
 What corrects the drift (2026-11-26): after the fit, a multi-view stereo step (stereo.py) moves the vertices along
 their normals to where the cameras' own images of the frame agree. It refines each frame's output only; the next
-frame starts from the photometric fit (FrameResult.track). Demo walk, 30 frames: mean CD 0.530 -> 0.419 cm.
+frame starts from the photometric fit (FrameResult.track). Demo walk, 30 frames: mean CD 0.530 -> 0.419 cm; with
+nothing held and a softer offset field (session 11) 0.368 cm, with patches bent to the surface's folds 0.347 cm.
 """
 from __future__ import annotations
 
