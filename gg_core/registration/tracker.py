@@ -53,7 +53,7 @@ nothing held and a softer offset field (session 11) 0.368 cm, with patches bent 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch

@@ -80,7 +80,7 @@ def test_curved_patches_find_a_crest_that_plane_patches_place_too_deep():
     ys = np.linspace(-0.05, 0.05, 11)
     verts = np.stack([np.zeros_like(ys), ys, np.full_like(ys, radius)], axis=1)
     normals = np.tile([0.0, 0.0, 1.0], (len(ys), 1))
-    t1, t2 = tangent_frames(normals)
+    _, t2 = tangent_frames(normals)
     across = np.abs(t2[0, 0]) > 0.99                     # which tangent axis runs around the cylinder
     quadrics = np.tile([0.0, 0.0, -1 / radius] if across else [-1 / radius, 0.0, 0.0], (len(ys), 1))
     offsets = np.arange(-0.01, 0.0100001, 0.0005)
