@@ -104,6 +104,7 @@ class PhotoOptions:
     rounds: int = 3              # later rounds search a third of the previous range around the last result
     pair_share: float = 0.5      # each depth scored by the better half of the camera pairs (module docstring)
     curved: bool = True          # patches bent to the mesh's local quadric (module docstring); False: tangent plane
+    curvature_gain: float = 1.0  # the quadric's curvature times this (registration/stereo.py: the mesh is too flat)
 
 
 def visible_cameras(verts: np.ndarray, normals: np.ndarray, cameras: Sequence[Camera], occluder: RayCaster,
@@ -239,7 +240,7 @@ def refine_along_normals(verts: np.ndarray, faces: np.ndarray, cameras: Sequence
     total_offset = np.zeros(len(verts))
     for _ in range(opt.rounds):
         offsets = np.arange(lo, hi + 0.5 * step, step)
-        quadrics = local_quadrics(verts, normals, adj) if opt.curved else None
+        quadrics = opt.curvature_gain * local_quadrics(verts, normals, adj) if opt.curved else None
         scores = sweep_scores(verts, normals, offsets, seen, cameras, images, opt.patch_spacing * spacing,
                               opt.patch, opt.pair_share, opt.patch_sigma, quadrics, masks)
         valid = np.isfinite(scores[:, 0])

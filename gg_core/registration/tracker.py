@@ -97,7 +97,10 @@ class TrackerConfig:
     stereo_rounds: int = 3             # photo-consistency rounds after each frame's fit (stereo.py; 0: none) ...
     stereo_search: float = 0.02        # ... searching this far (m) along the normals either way ...
     stereo_stiffness: float = 1.0      # ... with an offset field this stiff (the template's: 2) ...
-    stereo_aggregate: int = 0          # ... and score curves averaged over this many neighbour steps (template: 2)
+    stereo_aggregate: int = 0          # ... score curves averaged over this many neighbour steps (template: 2) ...
+    stereo_curvature_gain: float = 1.5  # ... and patches bent to this times the mesh's curvature (stereo.py)
+    smooth_window: int = 7             # frames of the finished sequence's temporal filter (temporal.py; 1: none) ...
+    smooth_order: int = 2              # ... and its polynomial order
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -241,8 +244,8 @@ class Tracker:
         if cfg.stereo_rounds > 0:
             moved, stereo = stereo_refine(fitted.numpy(), self.faces, views, (body_verts, self.collider.faces),
                                           cfg.stereo_search, cfg.stereo_rounds, cfg.stereo_stiffness,
-                                          cfg.stereo_aggregate)
-            final = _pushed_out(torch.from_numpy(moved), body) if cfg.w_body > 0 else torch.from_numpy(moved)
+                                          cfg.stereo_aggregate, cfg.stereo_curvature_gain)
+            final = pushed_out(torch.from_numpy(moved), body) if cfg.w_body > 0 else torch.from_numpy(moved)
         log = {"iterations": it + 1, "seconds": time.perf_counter() - start,
                "cpu_seconds": time.process_time() - cpu_start, "stereo": stereo,
                "l_body": float(body(final, body.contacts(final))),
@@ -275,7 +278,7 @@ def _depth(x: torch.Tensor, contacts, eps: float) -> torch.Tensor:
     return (eps - ((x - contacts.points) * contacts.normals).sum(-1)).clamp(min=0.0) * contacts.active
 
 
-def _pushed_out(x: torch.Tensor, body: BodyTerm) -> torch.Tensor:
+def pushed_out(x: torch.Tensor, body: BodyTerm) -> torch.Tensor:
     """`x` with vertices closer than the body term's eps to the body moved out along the contact normal to eps
     (the stereo step moves vertices after the fit's own projection)."""
     contacts = body.contacts(x)

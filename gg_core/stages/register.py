@@ -6,9 +6,11 @@ first aligned rigidly to the first frame (--align): "body" moves it with the rig
 under it from the template frame to that frame; "icp" then refines that by ICP against a point cloud of the
 frame reconstructed from its masks (stage 1's geometry code); "none" keeps the template where it is. Then every
 frame is fitted by the tracker (registration.tracker), warm-started with a constant-velocity prediction from
-the previous two frames.
+the previous two frames, and refined by its stereo step; last, each vertex's trajectory over the finished
+sequence is filtered in time (registration.temporal).
 
-Outputs: <project>/stage2/<sequence>/meshes/<frame>.ply (template topology), renders for inspection
+Outputs: <project>/stage2/<sequence>/meshes/<frame>.ply (template topology; each frame's own result before the
+temporal filter in refined/<frame>.ply, its photometric fit in fit/<frame>.ply), renders for inspection
 (<project>/stage2/<sequence>/renders/<frame>.png: target | render | difference for one camera),
 <project>/stage2/<sequence>/frames.json (per-frame logs and input keys) and <project>/reports/register.json
 with per sequence cd_cm, p2m_cm, fscore_1cm (only when the capture has ground-truth meshes), l_body (the
@@ -17,8 +19,9 @@ cpu_s_per_frame, and over all sequences wall_s_per_frame (the tracking's wall cl
 are registered at once, one single-threaded process each, gg_core/parallel.py). Ground truth is read only to
 score finished meshes.
 
-Resumable per frame: a frame is skipped when its mesh exists and its key (stage 1 files, options, the frame's
-input files and the previous frame's key) is unchanged; changing one frame refits the frames after it.
+Resumable per frame: a frame is skipped when its refined mesh exists and its key (stage 1 files, options, the frame's
+input files and the previous frame's key) is unchanged; changing one frame refits the frames after it. The
+temporal filter reruns (it takes seconds) whenever a frame changed or a filtered mesh is missing.
 """
 from __future__ import annotations
 
@@ -279,7 +282,7 @@ def run_register(req: RegisterRequest) -> Path:
     factor = req.texture_factor or texture_factor(stage1.texture, load_views(first, frames_of[first.name][0]))
     options = {"config": asdict(config), "ablation": req.ablation, "align": req.align, "icp_scale": req.icp_scale,
                "texture_factor": factor, "texture_refit": req.texture_refit}
-    progress = Progress(STAGE, sum(len(f) + 1 for f in frames_of.values()) + 1 +
+    progress = Progress(STAGE, sum(len(f) + 2 for f in frames_of.values()) + 1 +
                         (req.texture_refit if factor > 1 else 0), req.progress)
     texture, refit_log = registration_texture(capture, project, stage1, factor, req.texture_refit, progress)
     progress.step(f"registration texture: 1/{factor} resolution" + (
@@ -343,7 +346,7 @@ def register_sequence(job: SequenceJob, step) -> dict:
     align_log: dict = logs.get("_alignment", {})
     for k, frame in enumerate(frames):
         key = _digest([key, frame, frame_files(seq, frame)])
-        mesh_path = out_dir / "meshes" / f"{frame}.ply"
+        mesh_path = out_dir / "refined" / f"{frame}.ply"    # the frame's own result, before the temporal filter
         fit_path = out_dir / "fit" / f"{frame}.ply"     # the photometric fit, where a stereo step refined it
         if mesh_path.is_file() and logs.get(frame, {}).get("key") == key:
             previous = (previous + [read_mesh(fit_path if fit_path.is_file() else mesh_path)[0]])[-2:]
@@ -371,10 +374,39 @@ def register_sequence(job: SequenceJob, step) -> dict:
         logs["_alignment"] = align_log
         write_json(log_path, logs)
         step(f"{seq.name} {frame}: {result.log['iterations']} iterations, {result.log['seconds']:.1f} s")
+    smoothed_key = _digest([key, config.smooth_window, config.smooth_order])
+    written = all((out_dir / "meshes" / f"{f}.ply").is_file() for f in frames)
+    if logs.get("_temporal") != smoothed_key or not written:
+        smooth_sequence(seq, frames, out_dir, stage1.faces, config, collider, logs)
+        logs["_temporal"] = smoothed_key
+        write_json(log_path, logs)
+    step(f"{seq.name}: temporal filter over {config.smooth_window} frames")
     report = sequence_report(seq, frames, logs, stage1.faces, out_dir, surface_metrics)
     report["alignment"] = align_log
     _write_renders(seq, frames, out_dir, stage1, job.renders)
     return report
+
+
+def smooth_sequence(seq: Sequence, frames: list[str], out_dir: Path, faces: np.ndarray, config, collider,
+                    logs: dict) -> None:
+    """Writes meshes/<frame>.ply: the refined frames' vertex trajectories filtered over time
+    (registration.temporal), pushed out of each frame's body again; logs' l_body becomes the final meshes'."""
+    import torch  # noqa: PLC0415
+
+    from ..registration.losses import BodyTerm  # noqa: PLC0415
+    from ..registration.temporal import smooth_trajectories  # noqa: PLC0415
+    from ..registration.tracker import pushed_out  # noqa: PLC0415
+    from ..registration.views import load_body  # noqa: PLC0415
+
+    refined = np.stack([read_mesh(out_dir / "refined" / f"{frame}.ply")[0] for frame in frames])
+    smoothed = smooth_trajectories(refined, config.smooth_window, config.smooth_order)
+    for frame, verts in zip(frames, smoothed):
+        body = BodyTerm(collider, load_body(seq, frame)[0])
+        x = torch.from_numpy(verts)
+        if config.w_body > 0:
+            x = pushed_out(x, body)
+        logs[frame]["l_body"] = float(body(x, body.contacts(x)))
+        write_ply(out_dir / "meshes" / f"{frame}.ply", x.numpy(), faces)
 
 
 def sequence_report(seq: Sequence, frames: list[str], logs: dict, faces: np.ndarray, out_dir: Path,

@@ -147,3 +147,22 @@ def test_an_occluder_hides_the_vertices_behind_it_from_that_camera_only():
     seen = visible_cameras(verts, normals, cams, RayCaster([(verts, faces), (card_v, card_f)]), 0.5, 0.005)
     assert not seen[1].any()
     assert seen[[0, 2, 3, 4]].all()
+
+
+def test_curvature_gain_scales_the_patches_bend():
+    # a bumped plane (a 2 cm Gaussian bump): gain 0 bends the patches by nothing, as flat patches do; gain 1 by
+    # the mesh's own quadric, which moves the bump's vertices differently
+    cams = _cameras()
+    images = [plane_image(c) for c in cams]
+    verts, faces = _plane(15, 0.3, 0.0)
+    if vertex_normals(verts, faces)[0, 2] < 0:
+        faces = faces[:, ::-1]
+    verts[:, 2] = 0.02 * np.exp(-(verts[:, 0] ** 2 + verts[:, 1] ** 2) / (2 * 0.04 ** 2))
+    far = RayCaster([(np.array([[9.0, 9, 9], [9.1, 9, 9], [9, 9.1, 9]]), np.array([[0, 1, 2]]))])
+    moved = {}
+    for name, options in (("flat", PhotoOptions(search_in=0.03, rounds=1, curved=False)),
+                          ("gain 0", PhotoOptions(search_in=0.03, rounds=1, curvature_gain=0.0)),
+                          ("gain 1", PhotoOptions(search_in=0.03, rounds=1))):
+        moved[name] = refine_along_normals(verts, faces, cams, images, far, 0.005, options)[0]
+    np.testing.assert_allclose(moved["gain 0"], moved["flat"], atol=1e-9)
+    assert np.abs(moved["gain 1"] - moved["flat"]).max() > 2e-5      # measured: 0.08 mm
