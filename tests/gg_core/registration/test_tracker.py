@@ -108,17 +108,17 @@ def test_stereo_step_refines_the_fit_when_switched_on(sheet_scene, monkeypatch):
     # the frame's views and body and its settings, and returns what it returns
     calls = []
 
-    def fake(verts, faces, views, body, search, rounds, stiffness, aggregate):
-        calls.append((search, rounds, stiffness, aggregate, verts.shape, len(views), body[1].shape))
+    def fake(verts, faces, views, body, search, rounds, stiffness, aggregate, curvature_gain):
+        calls.append((search, rounds, stiffness, aggregate, curvature_gain, verts.shape, len(views), body[1].shape))
         return verts + [0.0, 0.0, 0.001], {"rounds": [{}] * rounds}
 
     monkeypatch.setattr(tracker_module, "stereo_refine", fake)
     off = fit(sheet_scene, sheet_scene.verts, TrackerConfig(lr=1e-12, coarse_scale=1.0, w_body=0.0, stereo_rounds=0), 2)
     assert not calls and off.log["stereo"] is None
     config = TrackerConfig(lr=1e-12, coarse_scale=1.0, w_body=0.0, stereo_rounds=2, stereo_search=0.01,
-                           stereo_stiffness=0.5, stereo_aggregate=1)
+                           stereo_stiffness=0.5, stereo_aggregate=1, stereo_curvature_gain=1.25)
     on = fit(sheet_scene, sheet_scene.verts, config, 2)
-    assert calls == [(0.01, 2, 0.5, 1, (len(sheet_scene.verts), 3), 4, (1, 3))]
+    assert calls == [(0.01, 2, 0.5, 1, 1.25, (len(sheet_scene.verts), 3), 4, (1, 3))]
     np.testing.assert_allclose(on.verts - off.verts, np.tile([0.0, 0.0, 0.001], (len(on.verts), 1)), atol=1e-6)
     assert len(on.log["stereo"]["rounds"]) == 2
     # the next frame starts from the photometric fit, not from the refined output
