@@ -65,7 +65,7 @@ from .views import View
 
 
 def stereo_refine(verts: np.ndarray, faces: np.ndarray, views: Sequence[View], body: tuple[np.ndarray, np.ndarray],
-                  search: float, rounds: int, stiffness: float, aggregate: int, curvature_gain: float = 1.0
+                  search: float, rounds: int, stiffness: float, aggregate: int, curvature_gain: float
                   ) -> tuple[np.ndarray, dict]:
     """(verts moved along their normals to where the cameras agree, within `search` metres either way, the offset
     field as stiff as `stiffness`, score curves averaged over `aggregate` neighbour steps, the patches bent to

@@ -162,7 +162,7 @@ def test_curvature_gain_scales_the_patches_bend():
     moved = {}
     for name, options in (("flat", PhotoOptions(search_in=0.03, rounds=1, curved=False)),
                           ("gain 0", PhotoOptions(search_in=0.03, rounds=1, curvature_gain=0.0)),
-                          ("gain 1", PhotoOptions(search_in=0.03, rounds=1))):
+                          ("gain 1", PhotoOptions(search_in=0.03, rounds=1, curvature_gain=1.0))):
         moved[name] = refine_along_normals(verts, faces, cams, images, far, 0.005, options)[0]
     np.testing.assert_allclose(moved["gain 0"], moved["flat"], atol=1e-9)
     assert np.abs(moved["gain 1"] - moved["flat"]).max() > 2e-5      # measured: 0.08 mm
