@@ -346,10 +346,10 @@ def register_sequence(job: SequenceJob, step) -> dict:
     align_log: dict = logs.get("_alignment", {})
     for k, frame in enumerate(frames):
         key = _digest([key, frame, frame_files(seq, frame)])
-        mesh_path = out_dir / "refined" / f"{frame}.ply"    # the frame's own result, before the temporal filter
+        refined_path = out_dir / "refined" / f"{frame}.ply"   # the frame's own result, before the temporal filter
         fit_path = out_dir / "fit" / f"{frame}.ply"     # the photometric fit, where a stereo step refined it
-        if mesh_path.is_file() and logs.get(frame, {}).get("key") == key:
-            previous = (previous + [read_mesh(fit_path if fit_path.is_file() else mesh_path)[0]])[-2:]
+        if refined_path.is_file() and logs.get(frame, {}).get("key") == key:
+            previous = (previous + [read_mesh(fit_path if fit_path.is_file() else refined_path)[0]])[-2:]
             step(f"{seq.name} {frame}: unchanged, kept", 2 if k == 0 else 1)
             continue
         body = load_body(seq, frame)
@@ -368,17 +368,17 @@ def register_sequence(job: SequenceJob, step) -> dict:
             write_ply(fit_path, result.fit, stage1.faces)
         elif fit_path.is_file():            # left by a run with the stereo step: not this fit's
             fit_path.unlink()
-        write_ply(mesh_path, result.verts, stage1.faces)
+        write_ply(refined_path, result.verts, stage1.faces)
         previous = (previous + [result.track])[-2:]
         logs[frame] = {"key": key, **{k2: v for k2, v in result.log.items() if k2 != "trace"}}
         logs["_alignment"] = align_log
         write_json(log_path, logs)
         step(f"{seq.name} {frame}: {result.log['iterations']} iterations, {result.log['seconds']:.1f} s")
-    smoothed_key = _digest([key, config.smooth_window, config.smooth_order])
+    # the last frame's key chains every frame's and the options (the filter's settings among them)
     written = all((out_dir / "meshes" / f"{f}.ply").is_file() for f in frames)
-    if logs.get("_temporal") != smoothed_key or not written:
+    if logs.get("_temporal") != key or not written:
         smooth_sequence(seq, frames, out_dir, stage1.faces, config, collider, logs)
-        logs["_temporal"] = smoothed_key
+        logs["_temporal"] = key
         write_json(log_path, logs)
     step(f"{seq.name}: temporal filter over {config.smooth_window} frames")
     report = sequence_report(seq, frames, logs, stage1.faces, out_dir, surface_metrics)
