@@ -15,7 +15,7 @@ import multiprocessing
 import os
 import queue
 import time
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Sequence, TypeVar
 
 from .jobs import Progress
@@ -34,39 +34,59 @@ def default_workers(jobs: int) -> int:
     return max(1, min(jobs, os.cpu_count() or 1))
 
 
-def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progress: Progress) -> list[R]:
+def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progress: Progress,
+             then: Callable[[J, R], J | None] | None = None) -> list[R]:
     """[fn(job, step) for job in jobs], in `workers` processes (in this process, one after another, for one
-    worker or one job). `fn` and the jobs must pickle. A failing job's exception is raised here once the other
-    jobs have finished, so what they write is kept (the stages resume from it)."""
+    worker or one job). `then(job, result)` may name a follow-up job, which `fn` runs as soon as a worker is
+    free; the job's result is then its follow-up's (stage 2: a sequence's fits, then its stereo step, so that a
+    worker done fitting refines a finished sequence instead of idling). `fn` and the jobs must pickle. A failing
+    job's exception is raised here once the other jobs have finished, so what they write is kept (the stages
+    resume from it)."""
     if workers <= 1 or len(jobs) <= 1:
-        return [fn(job, progress.step) for job in jobs]
+        return [_chain(fn, job, progress.step, then) for job in jobs]
     ctx = multiprocessing.get_context("spawn")
     messages = ctx.Queue()
+    results: list = [None] * len(jobs)
+    errors: list[BaseException] = []
     with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=ctx, initializer=_init_worker,
                              initargs=(messages,)) as pool:
-        futures = [pool.submit(_run, fn, job) for job in jobs]
-        _relay(messages, futures, progress)
-        return [f.result() for f in futures]
-
-
-def _relay(messages, futures: list[Future], progress: Progress) -> None:
-    """Pass the workers' steps on until every job has said it ended (a job's messages come before its end, on
-    the same queue), or, should a worker die without saying so, its future failed and the queue stayed quiet."""
-    ended, quiet_since = 0, None
-    while ended < len(futures):
-        try:
-            item = messages.get(timeout=_POLL_S)
-        except queue.Empty:
-            if not all(f.done() for f in futures):
+        pending = {pool.submit(_run, fn, job): (i, job) for i, job in enumerate(jobs)}
+        started, ended, quiet_since = len(jobs), 0, None
+        while pending or ended < started:
+            for future in [f for f in pending if f.done()]:
+                i, job = pending.pop(future)
+                if future.exception() is not None:
+                    errors.append(future.exception())
+                    continue
+                follow = then(job, future.result()) if then is not None else None
+                if follow is None:
+                    results[i] = future.result()
+                else:
+                    pending[pool.submit(_run, fn, follow)] = (i, follow)
+                    started += 1
+            try:
+                item = messages.get(timeout=_POLL_S)
+            except queue.Empty:
+                # a worker that died says nothing: once every job is done, wait for the queue to stay quiet
+                if pending:
+                    continue
+                quiet_since = quiet_since or time.monotonic()
+                if time.monotonic() - quiet_since > _GRACE_S:
+                    break
                 continue
-            quiet_since = quiet_since or time.monotonic()
-            if time.monotonic() - quiet_since > _GRACE_S:
-                return
-            continue
-        if item is None:
-            ended += 1
-        else:
-            progress.step(*item)
+            if item is None:
+                ended += 1
+            else:
+                progress.step(*item)
+    if errors:
+        raise errors[0]
+    return results
+
+
+def _chain(fn: Callable[[J, Step], R], job: J, step: Step, then: Callable[[J, R], J | None] | None) -> R:
+    result = fn(job, step)
+    follow = then(job, result) if then is not None else None
+    return result if follow is None else _chain(fn, follow, step, then)
 
 
 def _init_worker(messages) -> None:

@@ -235,42 +235,76 @@ def refine_along_normals(verts: np.ndarray, faces: np.ndarray, cameras: Sequence
     (the garment's, per camera) keep the patches' samples off the background (sweep_scores)."""
     opt = options or PhotoOptions()
     verts = np.asarray(verts, np.float64).copy()
-    faces = np.asarray(faces, np.int64)
-    adj = adjacency(faces, len(verts))
-    lap = sp.diags(np.asarray(adj.sum(axis=1)).ravel()) - adj
-    normals = vertex_normals(verts, faces)
+    sweep = Sweep(faces, len(verts), opt)
+    normals = vertex_normals(verts, sweep.faces)
     seen = visible_cameras(verts, normals, cameras, occluder, opt.min_cosine, spacing)
-    lo, hi = -opt.search_in, opt.search_out
-    step = 0.5 * spacing
     log = {"cameras_per_vertex": float(seen.sum(axis=0).mean()), "rounds": []}
     total_offset = np.zeros(len(verts))
-    for _ in range(opt.rounds):
-        offsets = np.arange(lo, hi + 0.5 * step, step)
-        quadrics = opt.curvature_gain * local_quadrics(verts, normals, adj) if opt.curved else None
+    for offsets in sweep.depths(spacing):
+        curves, weight = sweep.curves(verts, normals, offsets, seen, cameras, images, spacing, masks)
+        move, round_log = sweep.solve(curves, weight, offsets)
+        verts += move[:, None] * normals
+        total_offset += move
+        log["rounds"].append(round_log)
+        normals = vertex_normals(verts, sweep.faces)
+    log["mean_offset_m"] = float(total_offset.mean())
+    return verts, log
+
+
+class Sweep:
+    """One mesh's photo-consistency rounds, in pieces that a caller can interleave: the depths each round
+    searches, the (neighbour-aggregated) score curves at them, and the smooth offset field they ask for.
+    registration/stereo.py averages the curves of neighbouring frames between the last two."""
+
+    def __init__(self, faces: np.ndarray, n_verts: int, options: PhotoOptions) -> None:
+        self.faces = np.asarray(faces, np.int64)
+        self.options = options
+        self.adj = adjacency(self.faces, n_verts)
+        self.lap = sp.diags(np.asarray(self.adj.sum(axis=1)).ravel()) - self.adj
+
+    def depths(self, spacing: float) -> list[np.ndarray]:
+        """Offsets along the normal each round scores: the first spans the search range in half-`spacing`
+        steps, each later one a third of the previous range around the last result at half the step."""
+        opt = self.options
+        lo, hi, step = -opt.search_in, opt.search_out, 0.5 * spacing
+        out = []
+        for _ in range(opt.rounds):
+            out.append(np.arange(lo, hi + 0.5 * step, step))
+            third = (hi - lo) / 6.0
+            lo, hi, step = -third, third, step / 2
+        return out
+
+    def curves(self, verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, seen: np.ndarray,
+               cameras: Sequence[Camera], images: Sequence[np.ndarray], spacing: float,
+               masks: Sequence[np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+        """([V, D] score curves averaged over `aggregate` neighbour steps, [V] the share of each average that
+        had scores: 0 where no two cameras see the vertex)."""
+        opt = self.options
+        quadrics = opt.curvature_gain * local_quadrics(verts, normals, self.adj) if opt.curved else None
         scores = sweep_scores(verts, normals, offsets, seen, cameras, images, opt.patch_spacing * spacing,
                               opt.patch, opt.pair_share, opt.patch_sigma, quadrics, masks)
         valid = np.isfinite(scores[:, 0])
         filled = np.where(valid[:, None], scores, 0.0)
-        agg = np.stack([smooth(filled[:, k], adj, opt.aggregate) for k in range(len(offsets))], axis=1)
-        weight = smooth(valid.astype(np.float64), adj, opt.aggregate)
-        agg = agg / np.maximum(weight[:, None], 1e-12)
-        best = np.argmax(agg, axis=1)
-        target = offsets[best] + step * _parabola_peak(agg, best)
-        confidence = np.where(weight > 0.5, np.max(agg, axis=1), 0.0)
+        agg = np.stack([smooth(filled[:, k], self.adj, opt.aggregate) for k in range(len(offsets))], axis=1)
+        weight = smooth(valid.astype(np.float64), self.adj, opt.aggregate)
+        return agg / np.maximum(weight[:, None], 1e-12), weight
+
+    def solve(self, curves: np.ndarray, weight: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, dict]:
+        """([V] move along the normals: the curves' sub-step peaks fitted by an offset field as stiff as the
+        options say, each vertex weighted by its peak score where `weight` > 0.5 and the score > min_score;
+        the round's log)."""
+        opt = self.options
+        step = offsets[1] - offsets[0] if len(offsets) > 1 else 0.0
+        best = np.argmax(curves, axis=1)
+        target = offsets[best] + step * _parabola_peak(curves, best)
+        confidence = np.where(weight > 0.5, np.max(curves, axis=1), 0.0)
         w = np.where(confidence > opt.min_score, confidence, 0.0)
-        system = (sp.diags(w) + opt.stiffness * lap + sp.identity(len(verts)) * 1e-6).tocsc()
+        system = (sp.diags(w) + opt.stiffness * self.lap + sp.identity(len(w)) * 1e-6).tocsc()
         move = sp.linalg.spsolve(system, w * target)
-        verts += move[:, None] * normals
-        total_offset += move
         confident = w > 0
-        log["rounds"].append({"search_m": [float(lo), float(hi)], "confident_vertices": int(confident.sum()),
-                              "mean_score": float(np.mean(confidence[confident])) if confident.any() else 0.0,
-                              "mean_move_m": float(np.abs(move).mean())})
-        normals = vertex_normals(verts, faces)
-        third = (hi - lo) / 6.0
-        lo, hi, step = -third, third, step / 2
-    log["mean_offset_m"] = float(total_offset.mean())
-    return verts, log
+        return move, {"search_m": [float(offsets[0]), float(offsets[-1])], "confident_vertices": int(confident.sum()),
+                      "mean_score": float(np.mean(confidence[confident])) if confident.any() else 0.0,
+                      "mean_move_m": float(np.abs(move).mean())}
 
 
 def _parabola_peak(values: np.ndarray, best: np.ndarray) -> np.ndarray:

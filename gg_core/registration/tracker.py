@@ -45,10 +45,11 @@ walk frames 0-11 from the 0.52 cm template (per-entry Adam: CD 0.617 cm): one se
 Adam with the mean square added to the denominator: 0.619 / 0.616 cm (lr 2e-3 / 4e-3); a learning rate decaying to
 0.02 instead of 0.1: 0.617 cm; L1 on high-passed images (sigma 2 px, against pose-dependent shading) with the
 2500-step texture: 0.557 cm, the same as without, so pose-dependent shading is at most a small part of the drift.
-What corrects the drift (2026-11-26): after the fit, a multi-view stereo step (stereo.py) moves the vertices along
-their normals to where the cameras' own images of the frame agree. It refines each frame's output only; the next
-frame starts from the photometric fit (FrameResult.track). Demo walk, 30 frames: mean CD 0.530 -> 0.419 cm; with
-nothing held and a softer offset field (session 11) 0.368 cm, with patches bent to the surface's folds 0.347 cm.
+What corrects the drift (2026-11-26): after the fits, a multi-view stereo step (stereo.py, run by stage 2 over the
+sequence's fits) moves the vertices along their normals to where the cameras' own images of the frame agree. It
+refines each frame's output only; the next frame starts from the photometric fit, which is what this class returns.
+Demo walk, 30 frames: mean CD 0.530 -> 0.419 cm; with nothing held and a softer offset field (session 11) 0.368
+cm, with patches bent to the surface's folds 0.347 cm.
 """
 from __future__ import annotations
 
@@ -64,7 +65,6 @@ from .appearance import contrast_background
 from .losses import Bending, BodyTerm, Strain, virtual_edges
 from .photometric import view_colors, view_loss, visible_gaussians
 from .smooth_param import SmoothParam, UniformAdam
-from .stereo import stereo_refine
 from .views import View
 
 SCHEDULES = ("never", "first_half", "second_half", "always")
@@ -94,11 +94,12 @@ class TrackerConfig:
     visibility_every: int = 25         # iterations between Gaussian visibility updates per view
     stop_motion: float = 0.0           # early stop: mean vertex step (m) per iteration below this ...
     stop_patience: int = 20            # ... for this many iterations in the fine phase (0 m: never stop early)
-    stereo_rounds: int = 3             # photo-consistency rounds after each frame's fit (stereo.py; 0: none) ...
+    stereo_rounds: int = 4             # photo-consistency rounds over the fits (stage 2, stereo.py; 0: none) ...
     stereo_search: float = 0.02        # ... searching this far (m) along the normals either way ...
     stereo_stiffness: float = 1.0      # ... with an offset field this stiff (the template's: 2) ...
     stereo_aggregate: int = 0          # ... score curves averaged over this many neighbour steps (template: 2) ...
-    stereo_curvature_gain: float = 1.5  # ... and patches bent to this times the mesh's curvature (stereo.py)
+    stereo_curvature_gain: float = 1.5  # ... patches bent to this times the mesh's curvature (stereo.py) ...
+    stereo_frames: int = 5             # ... and score curves averaged over this many frames (odd; stereo.py)
     smooth_window: int = 7             # frames of the finished sequence's temporal filter (temporal.py; 1: none) ...
     smooth_order: int = 2              # ... and its polynomial order
     seed: int = 0
@@ -107,6 +108,8 @@ class TrackerConfig:
         for name in ("ve", "body"):
             if getattr(self, name) not in SCHEDULES:
                 raise ValueError(f"{name} schedule must be one of {SCHEDULES}, got {getattr(self, name)!r}")
+        if self.stereo_frames < 1 or self.stereo_frames % 2 == 0:
+            raise ValueError(f"stereo_frames must be a positive odd frame count, got {self.stereo_frames}")
 
 
 ABLATIONS: dict[str, dict] = {
@@ -131,15 +134,8 @@ def _active(schedule: str, phase: float) -> bool:
 
 @dataclass
 class FrameResult:
-    verts: np.ndarray                  # the frame's registered mesh
+    verts: np.ndarray                  # the frame's photometric fit
     log: dict = field(default_factory=dict)
-    fit: np.ndarray | None = None      # the photometric fit before the stereo step, if one ran
-
-    @property
-    def track(self) -> np.ndarray:
-        """What the next frame starts from and takes its rest shape from: the photometric fit. The stereo step
-        refines each frame's output only; fed back, its wrong moves compound (stereo.py)."""
-        return self.verts if self.fit is None else self.fit
 
 
 class Tracker:
@@ -239,20 +235,13 @@ class Tracker:
             calm = calm + 1 if motion < cfg.stop_motion and scale == 1.0 and phase >= 0.5 else 0
             if cfg.stop_patience and calm >= cfg.stop_patience:
                 break
-        fitted = x.detach().double()
-        final, stereo = fitted, None
-        if cfg.stereo_rounds > 0:
-            moved, stereo = stereo_refine(fitted.numpy(), self.faces, views, (body_verts, self.collider.faces),
-                                          cfg.stereo_search, cfg.stereo_rounds, cfg.stereo_stiffness,
-                                          cfg.stereo_aggregate, cfg.stereo_curvature_gain)
-            final = pushed_out(torch.from_numpy(moved), body) if cfg.w_body > 0 else torch.from_numpy(moved)
+        final = x.detach().double()
         log = {"iterations": it + 1, "seconds": time.perf_counter() - start,
-               "cpu_seconds": time.process_time() - cpu_start, "stereo": stereo,
-               "l_body": float(body(final, body.contacts(final))),
+               "cpu_seconds": time.process_time() - cpu_start, "l_body": float(body(final, body.contacts(final))),
                "rgb_first": trace["rgb"][0], "rgb_last": float(np.mean(trace["rgb"][-10:])),
                "weighted_terms_mean": {k: v / (it + 1) for k, v in term_sums.items()},
                "trace": trace}
-        return FrameResult(final.numpy(), log, None if stereo is None else fitted.numpy())
+        return FrameResult(final.numpy(), log)
 
     def _project_out(self, u: torch.Tensor, x: torch.Tensor, contacts, eps: float) -> torch.Tensor:
         """Moves the vertices closer than `eps` to the body along the contact normal to `eps` (the minimizer of

@@ -6,29 +6,31 @@ first aligned rigidly to the first frame (--align): "body" moves it with the rig
 under it from the template frame to that frame; "icp" then refines that by ICP against a point cloud of the
 frame reconstructed from its masks (stage 1's geometry code); "none" keeps the template where it is. Then every
 frame is fitted by the tracker (registration.tracker), warm-started with a constant-velocity prediction from
-the previous two frames, and refined by its stereo step; last, each vertex's trajectory over the finished
-sequence is filtered in time (registration.temporal).
+the previous two frames; then the sequence's fits are refined by the stereo step (registration.stereo, which
+compares neighbouring frames' evidence) and each vertex's trajectory is filtered in time (registration.temporal).
 
 Outputs: <project>/stage2/<sequence>/meshes/<frame>.ply (template topology; each frame's own result before the
 temporal filter in refined/<frame>.ply, its photometric fit in fit/<frame>.ply), renders for inspection
 (<project>/stage2/<sequence>/renders/<frame>.png: target | render | difference for one camera),
 <project>/stage2/<sequence>/frames.json (per-frame logs and input keys) and <project>/reports/register.json
 with per sequence cd_cm, p2m_cm, fscore_1cm (only when the capture has ground-truth meshes), l_body (the
-body term's value at the end of each frame's fit, mean over frames), s_per_frame (wall clock of the fit) and
-cpu_s_per_frame, and over all sequences wall_s_per_frame (the tracking's wall clock over the frames: sequences
-are registered at once, one single-threaded process each, gg_core/parallel.py). Ground truth is read only to
-score finished meshes.
+body term's value on the final meshes, mean over frames), s_per_frame (wall clock of the fit and of the
+frame's share of the stereo step) and cpu_s_per_frame, and over all sequences wall_s_per_frame (the tracking's
+wall clock over the frames: sequences are registered at once, one single-threaded process each,
+gg_core/parallel.py). Ground truth is read only to score finished meshes.
 
-Resumable per frame: a frame is skipped when its refined mesh exists and its key (stage 1 files, options, the frame's
-input files and the previous frame's key) is unchanged; changing one frame refits the frames after it. The
-temporal filter reruns (it takes seconds) whenever a frame changed or a filtered mesh is missing.
+Resumable per frame: a frame's fit is kept when its fit mesh exists and its key (stage 1 files, the options the
+fits depend on, the frame's input files and the previous frame's key) is unchanged; changing one frame refits the
+frames after it. The stereo step (about a fifth of the time) and the temporal filter (seconds) rerun over the whole
+sequence whenever a fit or their own settings changed, or one of their meshes is missing; new stereo or filter
+settings keep the fits.
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -282,7 +284,7 @@ def run_register(req: RegisterRequest) -> Path:
     factor = req.texture_factor or texture_factor(stage1.texture, load_views(first, frames_of[first.name][0]))
     options = {"config": asdict(config), "ablation": req.ablation, "align": req.align, "icp_scale": req.icp_scale,
                "texture_factor": factor, "texture_refit": req.texture_refit}
-    progress = Progress(STAGE, sum(len(f) + 2 for f in frames_of.values()) + 1 +
+    progress = Progress(STAGE, sum(2 * len(f) + 2 for f in frames_of.values()) + 1 +
                         (req.texture_refit if factor > 1 else 0), req.progress)
     texture, refit_log = registration_texture(capture, project, stage1, factor, req.texture_refit, progress)
     progress.step(f"registration texture: 1/{factor} resolution" + (
@@ -293,7 +295,7 @@ def run_register(req: RegisterRequest) -> Path:
                         req.icp_scale, req.renders) for s in seqs]
     workers = req.workers if req.workers is not None else default_workers(len(jobs))
     tracking = time.perf_counter()
-    report = dict(zip(names, run_jobs(register_sequence, jobs, workers, progress)))
+    report = dict(zip(names, run_jobs(register_sequence, jobs, workers, progress, then=refine_next)))
     tracked_frames = sum(len(f) for f in frames_of.values())
     mean = {**_mean_metrics(report), "wall_s_per_frame": (time.perf_counter() - tracking) / tracked_frames}
     payload = {"ablation": req.ablation, "sequences": report, "mean": mean,
@@ -321,35 +323,54 @@ class SequenceJob:
     align: str
     icp_scale: bool
     renders: int
+    phase: str = "fit"                   # "fit", then "refine" (stereo, temporal filter, report, renders)
 
 
-def register_sequence(job: SequenceJob, step) -> dict:
-    """Fit every frame of one sequence (resuming unchanged frames), write its meshes, logs and renders; returns
-    its report entry. `step(message, advance)` reports progress."""
-    from ..gaussians.texture import GaussianTexture  # noqa: PLC0415 - torch
-    from ..metrics.surface import surface_metrics  # noqa: PLC0415
+def register_sequence(job: SequenceJob, step) -> dict | None:
+    """One phase of a sequence's registration. "fit": fit every frame (resuming unchanged frames); "refine":
+    refine the fits by stereo, filter them in time, write the meshes, renders and the sequence's report entry,
+    which it returns. `step(message, advance)` reports progress. Two phases so that a worker done fitting can
+    refine another sequence while the last one is still being fitted (refine_next)."""
     from ..physics.contact import BodyCollider  # noqa: PLC0415
-    from ..registration.tracker import Tracker  # noqa: PLC0415
-    from ..registration.views import load_body, load_views  # noqa: PLC0415
+    from ..registration.views import load_body  # noqa: PLC0415
     from .behavior import hand_mask  # noqa: PLC0415
 
     capture, stage1 = Capture(job.capture), load_stage1(job.project)
-    seq, frames, config = capture.sequence(job.sequence), job.frames, job.config
+    seq = capture.sequence(job.sequence)
     out_dir = job.project / "stage2" / seq.name
     log_path = out_dir / "frames.json"
     logs = json.loads(log_path.read_text()) if log_path.is_file() else {}
-    body0 = load_body(seq, frames[0])
+    body0 = load_body(seq, job.frames[0])
     collider = BodyCollider(body0[1], len(body0[0]), exclude=hand_mask(len(body0[0])))
+    if job.phase == "fit":
+        _fit_frames(job, capture, stage1, seq, collider, logs, log_path, step)
+        return None
+    return _refine_and_report(job, stage1, seq, collider, logs, log_path, step)
+
+
+def refine_next(job: SequenceJob, result: dict | None) -> SequenceJob | None:
+    """The follow-up of a sequence's fit phase (parallel.run_jobs `then`): its refine phase."""
+    return replace(job, phase="refine") if job.phase == "fit" else None
+
+
+def _fit_frames(job: SequenceJob, capture: Capture, stage1: Stage1, seq: Sequence, collider, logs: dict,
+                log_path: Path, step) -> None:
+    """Fits every frame into fit/<frame>.ply, keeping those whose key is unchanged; logs["_fits"] becomes the
+    last frame's key, which chains every frame's."""
+    from ..gaussians.texture import GaussianTexture  # noqa: PLC0415 - torch
+    from ..registration.tracker import Tracker  # noqa: PLC0415
+    from ..registration.views import load_body, load_views  # noqa: PLC0415
+
+    frames, config, out_dir = job.frames, job.config, log_path.parent
     tracker = Tracker(GaussianTexture.from_state(job.texture), stage1.verts, stage1.faces, collider, config)
-    key = _digest([stage1.files, job.options, seq.name])
+    key = _digest([stage1.files, _settings(job.options)["fit"], seq.name])
     previous: list[np.ndarray] = []
     align_log: dict = logs.get("_alignment", {})
     for k, frame in enumerate(frames):
         key = _digest([key, frame, frame_files(seq, frame)])
-        refined_path = out_dir / "refined" / f"{frame}.ply"   # the frame's own result, before the temporal filter
-        fit_path = out_dir / "fit" / f"{frame}.ply"     # the photometric fit, where a stereo step refined it
-        if refined_path.is_file() and logs.get(frame, {}).get("key") == key:
-            previous = (previous + [read_mesh(fit_path if fit_path.is_file() else refined_path)[0]])[-2:]
+        fit_path = out_dir / "fit" / f"{frame}.ply"
+        if fit_path.is_file() and logs.get(frame, {}).get("key") == key:
+            previous = (previous + [read_mesh(fit_path)[0]])[-2:]
             step(f"{seq.name} {frame}: unchanged, kept", 2 if k == 0 else 1)
             continue
         body = load_body(seq, frame)
@@ -364,27 +385,89 @@ def register_sequence(job: SequenceJob, step) -> dict:
             iterations = config.iterations
         result = tracker.fit_frame(guess, views, body[0], previous=previous[-1] if previous else None,
                                    iterations=iterations)
-        if result.fit is not None:
-            write_ply(fit_path, result.fit, stage1.faces)
-        elif fit_path.is_file():            # left by a run with the stereo step: not this fit's
-            fit_path.unlink()
-        write_ply(refined_path, result.verts, stage1.faces)
-        previous = (previous + [result.track])[-2:]
+        write_ply(fit_path, result.verts, stage1.faces)
+        previous = (previous + [result.verts])[-2:]
         logs[frame] = {"key": key, **{k2: v for k2, v in result.log.items() if k2 != "trace"}}
         logs["_alignment"] = align_log
         write_json(log_path, logs)
         step(f"{seq.name} {frame}: {result.log['iterations']} iterations, {result.log['seconds']:.1f} s")
-    # the last frame's key chains every frame's and the options (the filter's settings among them)
-    written = all((out_dir / "meshes" / f"{f}.ply").is_file() for f in frames)
-    if logs.get("_temporal") != key or not written:
+    logs["_fits"] = key
+    write_json(log_path, logs)
+
+
+def _refine_and_report(job: SequenceJob, stage1: Stage1, seq: Sequence, collider, logs: dict, log_path: Path,
+                       step) -> dict:
+    """Stereo over the fits and the temporal filter, each rerun when the fits or its settings changed; then the
+    sequence's report entry and renders."""
+    from ..metrics.surface import surface_metrics  # noqa: PLC0415
+
+    frames, config, out_dir = job.frames, job.config, log_path.parent
+    settings = _settings(job.options)
+    key = _digest([logs["_fits"], settings["stereo"]])
+    if logs.get("_stereo") != key or not all((out_dir / "refined" / f"{f}.ply").is_file() for f in frames):
+        refine_sequence(seq, frames, out_dir, stage1.faces, config, collider, logs, step)
+        logs["_stereo"] = key
+        write_json(log_path, logs)
+    else:
+        step(f"{seq.name}: stereo unchanged, kept", len(frames))
+    key = _digest([key, settings["temporal"]])
+    if logs.get("_temporal") != key or not all((out_dir / "meshes" / f"{f}.ply").is_file() for f in frames):
         smooth_sequence(seq, frames, out_dir, stage1.faces, config, collider, logs)
         logs["_temporal"] = key
         write_json(log_path, logs)
     step(f"{seq.name}: temporal filter over {config.smooth_window} frames")
     report = sequence_report(seq, frames, logs, stage1.faces, out_dir, surface_metrics)
-    report["alignment"] = align_log
+    report["alignment"] = logs.get("_alignment", {})
     _write_renders(seq, frames, out_dir, stage1, job.renders)
     return report
+
+
+def _settings(options: dict) -> dict[str, dict]:
+    """The options split by the step they change: the fits, the stereo step, the temporal filter; so that new
+    stereo or filter settings keep the fits (the slow part)."""
+    config = options["config"]
+    later = {name: {k: v for k, v in config.items() if k.startswith(f"{name}_")} for name in ("stereo", "smooth")}
+    fit_config = {k: v for k, v in config.items() if not k.startswith(("stereo_", "smooth_"))}
+    return {"fit": {**options, "config": fit_config}, "stereo": later["stereo"], "temporal": later["smooth"]}
+
+
+def refine_sequence(seq: Sequence, frames: list[str], out_dir: Path, faces: np.ndarray, config, collider,
+                    logs: dict, step) -> None:
+    """Writes refined/<frame>.ply: the fits refined by the stereo step (registration.stereo), pushed out of each
+    frame's body; each frame's log gets the step's ("stereo"). No rounds: the fits as they are."""
+    import torch  # noqa: PLC0415
+
+    from ..reconstruction.photo_consistency import PhotoOptions  # noqa: PLC0415
+    from ..registration.losses import BodyTerm  # noqa: PLC0415
+    from ..registration.stereo import stereo_sequence  # noqa: PLC0415
+    from ..registration.tracker import pushed_out  # noqa: PLC0415
+    from ..registration.views import load_body, load_views  # noqa: PLC0415
+
+    fits = [read_mesh(out_dir / "fit" / f"{frame}.ply")[0] for frame in frames]
+    bodies: dict[int, np.ndarray] = {}
+
+    def load(t: int):
+        body = load_body(seq, frames[t])
+        bodies[t] = body[0]
+        return load_views(seq, frames[t], body=body), (body[0], collider.faces)
+
+    def done(t: int, verts: np.ndarray, log: dict) -> None:
+        body = bodies.pop(t) if t in bodies else load_body(seq, frames[t])[0]
+        x = torch.from_numpy(verts)
+        if config.w_body > 0:
+            x = pushed_out(x, BodyTerm(collider, body))
+        write_ply(out_dir / "refined" / f"{frames[t]}.ply", x.numpy(), faces)
+        logs[frames[t]]["stereo"] = log
+        step(f"{seq.name} {frames[t]}: stereo, {log['seconds']:.1f} s")
+
+    if config.stereo_rounds == 0:
+        for t, verts in enumerate(fits):
+            done(t, verts, {"rounds": [], "seconds": 0.0, "cpu_seconds": 0.0})
+        return
+    options = PhotoOptions(search_in=config.stereo_search, search_out=config.stereo_search,
+                           rounds=config.stereo_rounds, stiffness=config.stereo_stiffness,
+                           aggregate=config.stereo_aggregate, curvature_gain=config.stereo_curvature_gain)
+    stereo_sequence(fits, faces, load, options, config.stereo_frames, done)
 
 
 def smooth_sequence(seq: Sequence, frames: list[str], out_dir: Path, faces: np.ndarray, config, collider,
@@ -415,8 +498,11 @@ def sequence_report(seq: Sequence, frames: list[str], logs: dict, faces: np.ndar
     per_frame = []
     gt = seq.gt_garment_files
     for frame in frames:
-        row = {"frame": frame, "l_body": logs[frame]["l_body"], "seconds": logs[frame]["seconds"],
-               "cpu_seconds": logs[frame]["cpu_seconds"], "iterations": logs[frame]["iterations"]}
+        stereo = logs[frame].get("stereo", {})
+        row = {"frame": frame, "l_body": logs[frame]["l_body"],
+               "seconds": logs[frame]["seconds"] + stereo.get("seconds", 0.0),
+               "cpu_seconds": logs[frame]["cpu_seconds"] + stereo.get("cpu_seconds", 0.0),
+               "iterations": logs[frame]["iterations"]}
         if frame in gt:
             verts = read_mesh(out_dir / "meshes" / f"{frame}.ply")[0]
             gv, gf = read_mesh(gt[frame])

@@ -70,3 +70,25 @@ def test_a_worker_that_dies_fails_the_run_instead_of_hanging_it():
 
 def test_default_workers_is_one_per_job_at_most_one_per_core():
     assert default_workers(1) == 1 and 1 <= default_workers(100) <= (os.cpu_count() or 1)
+
+
+def halve_then_square(job: tuple[str, int], step) -> tuple[str, int]:
+    kind, value = job
+    step(f"{kind} {value}")
+    return ("half", value // 2) if kind == "start" else ("done", value * value)
+
+
+def follow_halves(job: tuple[str, int], result: tuple[str, int]) -> tuple[str, int] | None:
+    return result if result[0] == "half" else None
+
+
+def test_follow_up_jobs_run_after_their_job_and_give_its_result():
+    for workers in (1, 2):
+        progress, stream = _progress(6)
+        results = run_jobs(halve_then_square, [("start", 8), ("start", 6), ("start", 10)], workers, progress,
+                           then=follow_halves)
+        assert results == [("done", 16), ("done", 9), ("done", 25)]
+        messages = [json.loads(line)["message"] for line in stream.getvalue().splitlines()]
+        assert sorted(messages) == ["half 3", "half 4", "half 5", "start 10", "start 6", "start 8"]
+        for value, half in ((8, 4), (6, 3), (10, 5)):     # each follow-up after its own job
+            assert messages.index(f"start {value}") < messages.index(f"half {half}")

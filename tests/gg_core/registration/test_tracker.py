@@ -6,7 +6,6 @@ import pytest
 
 from gg_core.gaussians import build_texture
 from gg_core.physics.contact import BodyCollider
-from gg_core.registration import tracker as tracker_module
 from gg_core.registration.tracker import ABLATIONS, Tracker, TrackerConfig, ablation_config
 
 FAR_BODY = (np.array([[0, 0, -5.0], [0.1, 0, -5.0], [0, 0.1, -5.0]]), np.array([[0, 1, 2]]))
@@ -51,6 +50,8 @@ def test_ablations_switch_terms_off_or_reschedule_them():
         ablation_config("nope")
     with pytest.raises(ValueError):
         TrackerConfig(body="sometimes")
+    with pytest.raises(ValueError):
+        TrackerConfig(stereo_frames=4)          # the stereo step's frame window has a middle frame
 
 
 def plane_grid(lo: np.ndarray, hi: np.ndarray, z: float, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -101,26 +102,3 @@ def test_virtual_edges_act_on_a_sequence_first_frame_only_unless_asked(sheet_sce
         log = tracker.fit_frame(squeezed, sheet_scene.views, FAR_BODY[0], previous=previous, iterations=4).log
         terms[name] = log["weighted_terms_mean"].get("ve", 0.0)
     assert terms["first"] > 0 and terms["asked"] > 0 and terms["tracked"] == 0.0
-
-
-def test_stereo_step_refines_the_fit_when_switched_on(sheet_scene, monkeypatch):
-    # the step itself is tested on a textured plane (test_stereo.py); here: the tracker hands it the fitted mesh,
-    # the frame's views and body and its settings, and returns what it returns
-    calls = []
-
-    def fake(verts, faces, views, body, search, rounds, stiffness, aggregate, curvature_gain):
-        calls.append((search, rounds, stiffness, aggregate, curvature_gain, verts.shape, len(views), body[1].shape))
-        return verts + [0.0, 0.0, 0.001], {"rounds": [{}] * rounds}
-
-    monkeypatch.setattr(tracker_module, "stereo_refine", fake)
-    off = fit(sheet_scene, sheet_scene.verts, TrackerConfig(lr=1e-12, coarse_scale=1.0, w_body=0.0, stereo_rounds=0), 2)
-    assert not calls and off.log["stereo"] is None
-    config = TrackerConfig(lr=1e-12, coarse_scale=1.0, w_body=0.0, stereo_rounds=2, stereo_search=0.01,
-                           stereo_stiffness=0.5, stereo_aggregate=1, stereo_curvature_gain=1.25)
-    on = fit(sheet_scene, sheet_scene.verts, config, 2)
-    assert calls == [(0.01, 2, 0.5, 1, 1.25, (len(sheet_scene.verts), 3), 4, (1, 3))]
-    np.testing.assert_allclose(on.verts - off.verts, np.tile([0.0, 0.0, 0.001], (len(on.verts), 1)), atol=1e-6)
-    assert len(on.log["stereo"]["rounds"]) == 2
-    # the next frame starts from the photometric fit, not from the refined output
-    assert off.fit is None and np.array_equal(off.track, off.verts)
-    np.testing.assert_allclose(on.track, off.verts, atol=1e-9)

@@ -15,7 +15,7 @@ import torch
 from gg_core.capture.layout import Capture
 from gg_core.commands.bench_register import _copy_stage1
 from gg_core.geometry.meshio import read_mesh, read_obj
-from gg_core.stages.register import RegisterRequest, load_stage1, registration_texture, run_register
+from gg_core.stages.register import RegisterRequest, _settings, load_stage1, registration_texture, run_register
 from gg_core.stages.template import TemplateRequest, run_template
 
 pytestmark = pytest.mark.slow
@@ -70,8 +70,9 @@ def test_outputs_keep_the_template_topology_and_score_against_ground_truth(full,
 
 def test_rerun_keeps_unchanged_frames_and_refits_after_a_change(full, tiny_capture, stage1):
     project, report_path = full
-    meshes = sorted((project / "stage2" / "00_walk" / "meshes").glob("*.ply")) + \
-        sorted((project / "stage2" / "00_walk" / "refined").glob("*.ply"))
+    meshes = [m for sub in ("fit", "refined", "meshes")
+              for m in sorted((project / "stage2" / "00_walk" / sub).glob("*.ply"))]
+    assert len(meshes) == 3 * FRAMES
     stamps = [m.stat().st_mtime_ns for m in meshes]
     start = time.perf_counter()
     register(tiny_capture, stage1, project)
@@ -125,3 +126,23 @@ def test_sequences_registered_in_parallel_workers_match_one_after_another(tiny_c
     for seq, frames in meshes[1].items():
         for one, two in zip(frames, meshes[2][seq]):
             assert np.abs(one - two).max() < 1e-3       # metres (measured on the dev machine: identical)
+
+
+def test_stereo_and_filter_settings_do_not_key_the_fits():
+    """New stereo or temporal-filter settings rerun those steps over the stored fits, not the fits."""
+    from dataclasses import asdict, replace
+
+    from gg_core.registration.tracker import TrackerConfig
+
+    def split(config):
+        return _settings({"config": asdict(config), "ablation": "full", "align": "body"})
+
+    base = split(TrackerConfig())
+    stereo = split(replace(TrackerConfig(), stereo_frames=3, stereo_rounds=2))
+    smooth = split(replace(TrackerConfig(), smooth_window=5))
+    fitting = split(replace(TrackerConfig(), iterations=50))
+    assert stereo["fit"] == base["fit"] and stereo["stereo"] != base["stereo"]
+    assert smooth["fit"] == base["fit"] and smooth["stereo"] == base["stereo"]
+    assert smooth["temporal"] != base["temporal"]
+    assert fitting["fit"] != base["fit"] and fitting["stereo"] == base["stereo"]
+    assert base["fit"]["ablation"] == "full" and "stereo_frames" in base["stereo"]
