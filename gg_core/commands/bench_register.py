@@ -4,8 +4,8 @@ Runs stage 1 (gg template) once, then stage 2 (gg register) four times: full, on
 terms), no-body (no collision term) and body-always (collision term from the first iteration), each into its
 own project folder holding a copy of the same stage 1 outputs, as many at once as there are cores (each in a
 single-threaded process: the seconds per frame are those of one core). The ablations switch loss terms only:
-every one keeps the tracker's multi-view stereo step after each frame (registration/stereo.py), which is not
-a loss term. Prints one JSON line with, per ablation, the mean over sequences of CD (cm), p2m (cm),
+every one keeps stage 2's multi-view stereo step over the fits (registration/stereo.py), which is not a
+loss term. Prints one JSON line with, per ablation, the mean over sequences of CD (cm), p2m (cm),
 F-score@1cm (%), L_body and seconds per frame (wall and CPU), plus the paper's figures on 4D-Dress for
 reference; a readable table goes to stderr. Without --capture the tiny preset is synthesized.
 """

@@ -91,6 +91,7 @@ import scipy.sparse as sp
 from ..capture.cameras import Camera
 from ..geometry.raycast import RayCaster
 from .mesh_graph import adjacency, smooth, vertex_normals
+from .patch_kernels import normalized_patches
 from .visual_hull import bilinear
 
 _VERTEX_CHUNK = 1024
@@ -192,17 +193,10 @@ def sweep_scores(verts: np.ndarray, normals: np.ndarray, offsets: np.ndarray, se
             idx = np.flatnonzero(seen[c, sl])
             if len(idx) == 0:
                 continue
-            uv, _ = cam.project(points[idx].reshape(-1, 3))
-            colour = bilinear(image, uv[:, 0], uv[:, 1]).reshape(len(idx), d, p, 3)
-            w = np.broadcast_to(weight, (len(idx), d, p))
-            if masks is not None:
-                w = w * bilinear(masks[c], uv[:, 0], uv[:, 1]).reshape(len(idx), d, p)
-                w = w / np.maximum(w.sum(axis=2, keepdims=True), 1e-12)
-            colour = colour - np.einsum("ndpc,ndp->ndc", colour, w)[:, :, None, :]
-            colour = (colour * np.sqrt(w)[..., None]).reshape(len(idx), d, p * 3)
-            colour /= np.maximum(np.linalg.norm(colour, axis=2, keepdims=True), 1e-6)
+            patches = normalized_patches(points[idx].reshape(-1, p, 3), cam, image, weight,
+                                         None if masks is None else masks[c])
             colours[c] = np.zeros((n, d, p * 3), np.float32)
-            colours[c][idx] = colour
+            colours[c][idx] = patches.reshape(len(idx), d, p * 3)
         scores[sl] = _best_pairs(colours, seen[:, sl], d, pair_share)
     return scores
 
