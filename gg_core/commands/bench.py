@@ -12,6 +12,7 @@ BENCHES: dict[str, str] = {
     "sim": "bench_sim",
     "register": "bench_register",
     "diagnose": "bench_diagnose",
+    "stereo": "bench_stereo",
 }
 
 

@@ -2,22 +2,8 @@ import numpy as np
 import pytest
 
 from gg_core.capture.cameras import look_at
+from gg_core.commands.bench_stereo import numpy_patches
 from gg_core.reconstruction.patch_kernels import normalized_patches
-from gg_core.reconstruction.visual_hull import bilinear
-
-
-def _reference(points, cam, image, weight, mask):
-    """The numpy formulation the kernel replaced: project, sample, weight, centre per channel, unit length."""
-    m, p = points.shape[:2]
-    uv, _ = cam.project(points.reshape(-1, 3))
-    colour = bilinear(image, uv[:, 0], uv[:, 1]).reshape(m, p, 3)
-    w = np.broadcast_to(weight, (m, p))
-    if mask is not None:
-        w = w * bilinear(mask, uv[:, 0], uv[:, 1]).reshape(m, p)
-        w = w / np.maximum(w.sum(axis=1, keepdims=True), 1e-12)
-    colour = (colour - np.einsum("mpc,mp->mc", colour, w)[:, None, :]) * np.sqrt(w)[..., None]
-    colour = colour.reshape(m, p * 3)
-    return colour / np.maximum(np.linalg.norm(colour, axis=1, keepdims=True), 1e-6)
 
 
 @pytest.mark.parametrize("masked", [False, True])
@@ -31,7 +17,7 @@ def test_patches_match_the_numpy_formulation(masked):
     weight = rng.random(9)
     weight /= weight.sum()
     got = normalized_patches(points, cam, image, weight, mask)
-    want = _reference(points, cam, image, weight, mask)
+    want = numpy_patches(points, cam, image, weight, mask)     # the formulation it replaced
     assert got.dtype == np.float32 and got.shape == (60, 27)
     np.testing.assert_allclose(got, want, atol=1e-6)
     lengths = np.linalg.norm(got, axis=1)
