@@ -286,9 +286,13 @@ class Sweep:
     def solve(self, curves: np.ndarray, weight: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, dict]:
         """([V] move along the normals: the curves' sub-step peaks fitted by an offset field as stiff as the
         options say, each vertex weighted by its peak score where `weight` > 0.5 and the score > min_score;
-        the round's log)."""
+        the round's log). No move on a grid of fewer than 3 depths: its argmax would only say which end is
+        nearer (a round finer than the images allow)."""
         opt = self.options
-        step = offsets[1] - offsets[0] if len(offsets) > 1 else 0.0
+        if len(offsets) < 3:       # coarse images: the round's range is under two steps, no peak to place
+            return np.zeros(len(curves)), {"search_m": [float(offsets[0]), float(offsets[-1])],
+                                           "confident_vertices": 0, "mean_score": 0.0, "mean_move_m": 0.0}
+        step = offsets[1] - offsets[0]
         best = np.argmax(curves, axis=1)
         target = offsets[best] + step * _parabola_peak(curves, best)
         confidence = np.where(weight > 0.5, np.max(curves, axis=1), 0.0)

@@ -1,7 +1,7 @@
 import numpy as np
 
 from gg_core.geometry.raycast import RayCaster
-from gg_core.reconstruction.photo_consistency import (PhotoOptions, local_quadrics, refine_along_normals,
+from gg_core.reconstruction.photo_consistency import (PhotoOptions, Sweep, local_quadrics, refine_along_normals,
                                                       sweep_scores, tangent_frames, visible_cameras)
 from gg_core.reconstruction.mesh_graph import adjacency, vertex_normals
 
@@ -166,3 +166,15 @@ def test_curvature_gain_scales_the_patches_bend():
         moved[name] = refine_along_normals(verts, faces, cams, images, far, 0.005, options)[0]
     np.testing.assert_allclose(moved["gain 0"], moved["flat"], atol=1e-9)
     assert np.abs(moved["gain 1"] - moved["flat"]).max() > 2e-5      # measured: 0.08 mm
+
+
+def test_a_round_with_fewer_than_three_depths_moves_nothing():
+    # coarse images: a late round's range is under two steps (a 40 x 30 px capture hit this with 4 rounds)
+    verts, faces = _plane(5, 0.3, 0.0)
+    sweep = Sweep(faces, len(verts), PhotoOptions())
+    for offsets in (np.array([-0.001]), np.array([-0.001, 0.002])):
+        curves = np.tile(np.linspace(0.2, 0.9, len(offsets)), (len(verts), 1))
+        move, log = sweep.solve(curves, np.ones(len(verts)), offsets)
+        assert np.array_equal(move, np.zeros(len(verts))) and log["confident_vertices"] == 0
+    move, _ = sweep.solve(np.tile([0.2, 0.9, 0.3], (len(verts), 1)), np.ones(len(verts)), np.array([-1e-3, 0, 1e-3]))
+    assert np.all(np.abs(move) < 1e-3) and np.abs(move).max() > 0
