@@ -42,6 +42,13 @@ def smooth(values: np.ndarray, adj: sp.csr_matrix, iterations: int, weight: floa
     return out
 
 
+def smoothed_normals(normals: np.ndarray, adj: sp.csr_matrix, iterations: int) -> np.ndarray:
+    """[V, 3] unit normals after `iterations` smoothing steps: the way a patch of surface faces, without the tilt of
+    wrinkles smaller than the patch (which camera sees a point is a property of the patch around it)."""
+    out = np.stack([smooth(normals[:, k], adj, iterations) for k in range(3)], axis=1)
+    return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
+
+
 def genus(faces: np.ndarray) -> int:
     """Genus of a connected manifold triangle mesh from its Euler characteristic and border loops."""
     from .surface_cut import border_loops  # noqa: PLC0415 - surface_cut builds on this module

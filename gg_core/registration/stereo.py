@@ -70,6 +70,15 @@ rounds: 0.367 / 0.339 / 94.19 %). Not kept, with 5 frames on the walk: a softer 
 frames' images are held at once. Cost: 6.1 s per frame with 4 rounds (demo walk, 5 frames, one core) with the
 patch sampling in numpy, 2.3 s since it is one compiled pass (reconstruction/patch_kernels.py; the same meshes
 to the last bit).
+
+Which cameras see a vertex is decided with its normal smoothed over 3 steps (VISIBILITY_SMOOTHING; session 14,
+2026-11-26): a fit's per-vertex normals carry the tilt of wrinkles smaller than a patch, which flips cameras near
+the 60-degree cone in and out from vertex to vertex. Offline on session 13's fits (/work/data/q10, all 30 frames,
+then the temporal filter), CD / p2m (cm) / F@1cm, raw normals -> 3 steps: walk 0.3265 / 0.3009 / 95.80 -> 0.3249 /
+0.2990 / 95.85 %, arm swing 0.3651 / 0.3384 / 94.22 -> 0.3638 / 0.3371 / 94.24 %, torso twist 0.3463 / 0.3173 /
+95.11 -> 0.3467 / 0.3174 / 95.10 %; 6 steps on the walk 0.3255 / 0.2994 / 95.84 %. Not kept (arm swing, with 3
+steps): cameras within 73 degrees for vertices fewer than 3 cameras see (p2m 0.3377 cm), a vertex with no say in its
+own frame given one by its neighbours' (walk 0.3011 cm), min_score 0.35 / 0.1 (0.3369 / 0.3375 cm).
 """
 
 from __future__ import annotations
@@ -82,12 +91,13 @@ import numpy as np
 
 from ..capture.cameras import Camera
 from ..geometry.raycast import RayCaster
-from ..reconstruction.mesh_graph import vertex_normals
+from ..reconstruction.mesh_graph import smoothed_normals, vertex_normals
 from ..reconstruction.photo_consistency import PhotoOptions, Sweep, visible_cameras
 from ..reconstruction.template_mesh import pixel_footprint
 from .views import View
 
 Body = tuple[np.ndarray, np.ndarray]          # (verts, faces) of a frame's body, an occluder
+VISIBILITY_SMOOTHING = 3      # smoothing steps of the normals that decide which cameras face a vertex (docstring)
 
 
 @dataclass
@@ -146,7 +156,8 @@ def stereo_sequence(fits: Sequence[np.ndarray], faces: np.ndarray, load: Callabl
             depths = sweep.depths(spacing)
         normals[t] = vertex_normals(meshes[t], sweep.faces)
         occluder = RayCaster([(meshes[t], sweep.faces), body])
-        seen = visible_cameras(meshes[t], normals[t], cameras, occluder, options.min_cosine, spacing)
+        facing = smoothed_normals(normals[t], sweep.adj, VISIBILITY_SMOOTHING)
+        seen = visible_cameras(meshes[t], facing, cameras, occluder, options.min_cosine, spacing)
         logs[t]["cameras_per_vertex"] = float(seen.sum(axis=0).mean())
         held[t] = _Frame(cameras, [v.rgb.numpy() for v in views], [v.garment.numpy() for v in views], seen)
         score(t, 0)
@@ -162,10 +173,10 @@ def stereo_sequence(fits: Sequence[np.ndarray], faces: np.ndarray, load: Callabl
         averaged = total / np.maximum(mass, 1e-12)[:, None]
         move, log = sweep.solve(averaged, curves[t, r][1], depths[r])
         meshes[t] = meshes[t] + move[:, None] * normals[t]
-        normals[t] = vertex_normals(meshes[t], sweep.faces)
         logs[t]["rounds"].append(log)
         curves.pop((t - half, r), None)          # frames after t no longer need it
         if r + 1 < rounds:
+            normals[t] = vertex_normals(meshes[t], sweep.faces)
             score(t, r + 1)
         else:
             del held[t]

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from gg_core.reconstruction.mesh_graph import adjacency, face_components, genus, smooth, vertex_area, vertex_normals
+from gg_core.reconstruction.mesh_graph import (adjacency, face_components, genus, smooth, smoothed_normals, vertex_area,
+                                               vertex_normals)
 from gg_core.reconstruction.surface_cut import border_loops, cut_at_level
 
 from .scenes import sphere_mesh
@@ -26,3 +27,17 @@ def test_normals_areas_smoothing_and_components():
     noisy = np.random.default_rng(0).normal(size=len(v))
     assert smooth(noisy, adj, 10).std() < 0.3 * noisy.std()
     assert np.all(face_components(np.concatenate([f, f + len(v)])) == np.repeat([0, 1], len(f)))
+
+
+def test_smoothed_normals_remove_the_tilt_of_small_wrinkles():
+    v, f = sphere_mesh(0.3, 3)
+    radial = v / np.linalg.norm(v, axis=1, keepdims=True)
+    bumpy = v * (1 + 0.03 * np.random.default_rng(0).normal(size=(len(v), 1)))     # 9 mm rms wrinkles
+    n = vertex_normals(bumpy, f)
+    adj = adjacency(f, len(v))
+    s = smoothed_normals(n, adj, 3)
+    assert np.allclose(np.linalg.norm(s, axis=1), 1.0)
+    tilt = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, radial), -1, 1))).mean()
+    tilt_smoothed = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", s, radial), -1, 1))).mean()
+    assert tilt_smoothed < 0.5 * tilt
+    assert np.array_equal(smoothed_normals(n, adj, 0), n / np.linalg.norm(n, axis=1, keepdims=True))
