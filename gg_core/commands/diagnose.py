@@ -43,6 +43,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fps", type=float, default=30.0, help="frame rate of the sequences")
     parser.add_argument("--substeps", type=int, default=2, help="implicit steps per frame (fits and rollouts)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the noise, the patches and the bootstrap")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="confirming refits run at once, each in its own single-threaded process (default: one "
+                             "per CPU core; 1: one after another in this process); the result does not depend on it")
     add_progress_option(parser)
 
 
@@ -55,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
                           fps=args.fps, substeps=args.substeps, seed=args.seed,
                           baseline_iterations=args.baseline_iterations, refit_iterations=args.refit_iterations,
                           max_samples=args.max_samples, fit_horizon=args.fit_horizon, min_gain=args.min_gain,
-                          min_gain_mm=args.min_gain_mm, bootstrap=args.bootstrap,
+                          min_gain_mm=args.min_gain_mm, bootstrap=args.bootstrap, workers=args.workers,
                           progress=args.progress)
     report = run_diagnose(req)
     if args.progress != "jsonl":

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..jobs import Progress
+from ..parallel import Step, default_workers, run_jobs
 from ..physics.cloth import Cloth
 from ..physics.contact import BodyCollider
 from ..physics.fitting import (BehaviorParams, FitConfig, Observed, fit_behavior, free_rollout, rollout_distance,
@@ -244,18 +245,16 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
 
     t0 = time.perf_counter()
     # the same refit without any candidate: trials are judged against equal optimization effort, so a gain cannot
-    # come from the baseline fit simply running longer
+    # come from the baseline fit simply running longer; it and the candidates' refits are independent jobs
     refit_config = fit_config(req, req.refit_iterations)
-    null_refit = trial(sim, BASELINE_FIT, [], ctx, None, train, heldout, attached, refit_config)
+    proposed = propose(sel, req.min_inclusion, req.max_trials)
+    jobs = [_TrialJob(n, None if n is None else sel.alone[n], sim, ctx if n is None else contexts[n], train, heldout,
+                      attached, refit_config, req.probe_acceleration, baseline_l2) for n in [None, *proposed]]
+    workers = req.workers if req.workers is not None else default_workers(len(jobs))
+    null_refit, *refits = run_jobs(_run_trial, jobs, workers, progress)
     null = judge_reference(Trial([], baseline_l2, float("nan"), baseline_train_l2), null_refit)
     before = null.heldout_l2
-    progress.step(f"baseline refit: held-out L2 {baseline_l2 * 1e3:.1f} -> {null_refit.heldout_l2 * 1e3:.1f} mm")
-    proposed = propose(sel, req.min_inclusion, req.max_trials)
-    trials = {}
-    for n in proposed:
-        trials[n] = _trial_from_starts(BY_NAME[n], sel.alone[n], sim, contexts[n], train, heldout, attached,
-                                       refit_config, req.probe_acceleration)
-        progress.step(f"trial {n}: held-out L2 {before * 1e3:.1f} -> {trials[n].heldout_l2 * 1e3:.1f} mm")
+    trials = dict(zip(proposed, refits))
     unphysical = {n: why for n in proposed if (why := implausible(trials[n], sim.cloth))}
     passing = sorted((n for n in proposed
                       if confirmed(trials[n], null, req.min_gain, req.min_gain_mm)
@@ -338,6 +337,34 @@ def propose(sel: Selection, min_inclusion: float, max_trials: int) -> list[str]:
     chosen = [n for n in sel.order if sel.inclusion[n] >= min_inclusion]
     others = sorted((n for n in sel.explained if n not in chosen), key=lambda n: -sel.explained[n])
     return (chosen + others)[:max_trials]
+
+
+@dataclass
+class _TrialJob:
+    """One confirming refit for a worker process (parallel.run_jobs): the candidate by name (candidates hold
+    closures, which do not pickle), None for the refit without candidates."""
+    name: str | None
+    coefs: np.ndarray | None
+    sim: ImplicitSimulator
+    ctx: Context
+    train: list[Observed]
+    heldout: list[Observed]
+    attached: np.ndarray
+    config: FitConfig
+    acceleration: float
+    baseline_l2: float            # the global fit's held-out error, for the progress line
+
+
+def _run_trial(job: _TrialJob, step: Step) -> Trial:
+    if job.name is None:
+        out = trial(job.sim, BASELINE_FIT, [], job.ctx, None, job.train, job.heldout, job.attached, job.config)
+        label = "baseline refit"
+    else:
+        out = _trial_from_starts(BY_NAME[job.name], job.coefs, job.sim, job.ctx, job.train, job.heldout,
+                                 job.attached, job.config, job.acceleration)
+        label = f"trial {job.name}"
+    step(f"{label}: held-out L2 {job.baseline_l2 * 1e3:.1f} -> {out.heldout_l2 * 1e3:.1f} mm")
+    return out
 
 
 def _trial_from_starts(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulator, ctx: Context,

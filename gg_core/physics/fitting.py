@@ -26,6 +26,8 @@ from .material import MATERIAL_NAMES, MATERIAL_SPEC, Material, from_latent, to_l
 from .simulator import ClothState, ImplicitSimulator, blend
 from .terms import StepInputs, System, Term
 
+_ADJOINT_CG_MAX = 50      # CG iterations of each inner adjoint solve (TeacherForced._adjoint says why)
+
 
 @dataclass
 class Observed:
@@ -272,14 +274,20 @@ class TeacherForced:
         """Solve H lambda = rhs per frame with the exact Hessian H (torch Hessian-vector products, all frames in one
         pass) by iterative refinement on the solver's PSD approximation H~: H~ alone drops compressive and
         curvature terms and was measured to give gradients off by 2x; a few refinements bring the residual from
-        ~30% to a few %. The best iterate is kept."""
+        ~30% to a few %. The best iterate is kept.
+
+        Inner solves stop at 50 CG iterations: measured on the diagnosis of a Blender test capture (400 vertices,
+        2 substeps, 18 adjoints against a converged solve), 73 % of the solves ran out of a 100-iteration budget
+        short of 1e-3, and 50 iterations give the same adjoint error (median 2.5 %, 90th percentile 5.9 %) in 61 %
+        of the time; 30 iterations with 6 refinements 2.4 / 3.7 % in 68 %, 15 with 6 7.1 / 13 %."""
         num = self.sim.num
 
         def solve_approx(b: np.ndarray) -> np.ndarray:
             # loose inner solves: the refinement loop corrects their error along with the Hessian's
             out = np.zeros_like(b)
             for k, system in enumerate(systems):
-                kernels.pcg(system.hdiag, system.hpair, num.pairs, num.sweep, self.free, b[k], out[k], 1e-3, 100)
+                kernels.pcg(system.hdiag, system.hpair, num.pairs, num.sweep, self.free, b[k], out[k], 1e-3,
+                            _ADJOINT_CG_MAX)
             return out
 
         lam = solve_approx(rhs)

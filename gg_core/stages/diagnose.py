@@ -79,6 +79,7 @@ class DiagnoseRequest:
     bootstrap: int = 100
     reference: list[str] = field(default_factory=list)   # candidates always trialled (benchmarks), never accepted
     reference_region: str = ""         # .npy of [V] weights for region candidates in reference trials
+    workers: int | None = None         # confirming refits run at once, one process each (None: one per core)
     progress: str = "bar"
 
 
@@ -135,6 +136,8 @@ def load(req: DiagnoseRequest, capture: Capture, names: list[str], source: str) 
 def run_diagnose(req: DiagnoseRequest) -> Path:
     if req.denoise not in DENOISE:
         raise InputError(f"unknown denoise mode '{req.denoise}'", "--denoise", f"choose one of: {', '.join(DENOISE)}")
+    if req.workers is not None and req.workers < 1:
+        raise InputError(f"--workers must be at least 1, got {req.workers}", "--workers", "pass 1 or more")
     start = time.perf_counter()
     capture = Capture(req.capture)
     train_names, heldout_names = split(capture, list(req.train), list(req.heldout))

@@ -109,12 +109,12 @@ def simulation_mesh(sequences: list[Observed], faces: np.ndarray, max_vertices: 
 
 
 def inputs_key(request: object, capture: Capture, names: list[str], source: str, project: Path) -> dict:
-    """What a stage's result depends on: its options (a dataclass, less project and progress) and the meshes it
-    reads (name, size, mtime), so a re-registered frame or a changed option reruns the stage."""
+    """What a stage's result depends on: its options (a dataclass, less project, progress and worker count) and
+    the meshes it reads (name, size, mtime), so a re-registered frame or a changed option reruns the stage."""
     files = {}
     for n in names:
         seq = capture.sequence(n)
         for kind, group in (("garment", garment_files(seq, source, project)), ("body", seq.body_files)):
             files[f"{n}/{kind}"] = file_stamps(group.values())
-    options = {k: v for k, v in asdict(request).items() if k not in ("project", "progress")}
+    options = {k: v for k, v in asdict(request).items() if k not in ("project", "progress", "workers")}
     return json.loads(json.dumps({"options": options, "source": source, "files": files}, default=str))

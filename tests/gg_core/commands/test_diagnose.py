@@ -25,10 +25,18 @@ def test_diagnose_refuses_a_missing_capture_with_one_line(tmp_path, capsys):
     assert len(err) == 1 and err[0].startswith("gg: error: capture folder not found")
 
 
+def test_diagnose_refuses_zero_workers_with_one_line(tmp_path, capsys):
+    capture = write_sim_capture(tmp_path / "capture", n_frames=10)
+    assert main(["diagnose", str(capture), "--project", str(tmp_path / "p"), "--workers", "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--workers must be at least 1" in err[0]
+
+
 def test_diagnose_command_prints_the_verdict(tmp_path, capsys):
     capture = write_sim_capture(tmp_path / "capture", n_frames=10)
     code = main(["diagnose", str(capture), "--project", str(tmp_path / "p"), "--substeps", "1",
-                 "--baseline-iterations", "3", "--refit-iterations", "2", "--bootstrap", "10", "--progress", "none"])
+                 "--baseline-iterations", "3", "--refit-iterations", "2", "--bootstrap", "10", "--workers", "1",
+                 "--progress", "none"])
     assert code == 0
     line = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert line["verdict"] in ("none", "missing") and line["report"].endswith("diagnose.json")

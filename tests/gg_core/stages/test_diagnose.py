@@ -33,7 +33,7 @@ def tilted(tmp_path_factory) -> Path:
 
 def test_hidden_gravity_tilt_is_named_refitted_and_improves_heldout(tilted, tmp_path):
     project = tmp_path / "project"
-    report_path = run_diagnose(DiagnoseRequest(capture=tilted, project=project, **FAST))
+    report_path = run_diagnose(DiagnoseRequest(capture=tilted, project=project, workers=2, **FAST))
     report = json.loads(report_path.read_text())
     assert report["verdict"] == "missing"
     assert report["accepted"] == ["gravity_offset"] and report["accepted_classes"] == ["gravity"]
@@ -49,15 +49,16 @@ def test_hidden_gravity_tilt_is_named_refitted_and_improves_heldout(tilted, tmp_
     assert set(frames["sequences"]) == {"a", "b"} and frames["unit"] == "m/s^2"
     page = (project / "reports" / "diagnose.html").read_text()
     assert "data:image/png;base64," in page and "Missing gravity offset" in page
-    # resumable: unchanged inputs keep the result
+    # resumable: unchanged inputs keep the result (the worker count is not an input: the refits do not depend on it)
     written = report_path.stat().st_mtime_ns
-    assert run_diagnose(DiagnoseRequest(capture=tilted, project=project, **FAST)) == report_path
+    assert run_diagnose(DiagnoseRequest(capture=tilted, project=project, workers=1, **FAST)) == report_path
     assert report_path.stat().st_mtime_ns == written
 
 
 def test_nothing_hidden_gives_verdict_none(tmp_path):
     capture = write_sim_capture(tmp_path / "plain")
-    report = json.loads(run_diagnose(DiagnoseRequest(capture=capture, project=tmp_path / "p", **FAST)).read_text())
+    report = json.loads(run_diagnose(DiagnoseRequest(capture=capture, project=tmp_path / "p", workers=1,
+                                                     **FAST)).read_text())
     assert report["verdict"] == "none" and report["accepted"] == []
     assert report["heldout_l2_after"] == report["heldout_l2_before"]
 
