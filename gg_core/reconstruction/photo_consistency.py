@@ -258,12 +258,17 @@ class Sweep:
 
     def depths(self, spacing: float) -> list[np.ndarray]:
         """Offsets along the normal each round scores: the first spans the search range in half-`spacing`
-        steps, each later one a third of the previous range around the last result at half the step."""
+        steps, each later one a third of the previous range around the last result at half the step. The rounds
+        stop before one of fewer than 3 depths: its argmax would only say which end is nearer (coarse images,
+        where a late round's range is under two steps; a 40 x 30 px capture's 4th round had one depth)."""
         opt = self.options
         lo, hi, step = -opt.search_in, opt.search_out, 0.5 * spacing
         out = []
         for _ in range(opt.rounds):
-            out.append(np.arange(lo, hi + 0.5 * step, step))
+            offsets = np.arange(lo, hi + 0.5 * step, step)
+            if len(offsets) < 3:
+                break
+            out.append(offsets)
             third = (hi - lo) / 6.0
             lo, hi, step = -third, third, step / 2
         return out
@@ -286,12 +291,8 @@ class Sweep:
     def solve(self, curves: np.ndarray, weight: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, dict]:
         """([V] move along the normals: the curves' sub-step peaks fitted by an offset field as stiff as the
         options say, each vertex weighted by its peak score where `weight` > 0.5 and the score > min_score;
-        the round's log). No move on a grid of fewer than 3 depths: its argmax would only say which end is
-        nearer (a round finer than the images allow)."""
+        the round's log). `offsets` is one of `depths`' grids (3 depths or more)."""
         opt = self.options
-        if len(offsets) < 3:       # coarse images: the round's range is under two steps, no peak to place
-            return np.zeros(len(curves)), {"search_m": [float(offsets[0]), float(offsets[-1])],
-                                           "confident_vertices": 0, "mean_score": 0.0, "mean_move_m": 0.0}
         step = offsets[1] - offsets[0]
         best = np.argmax(curves, axis=1)
         target = offsets[best] + step * _parabola_peak(curves, best)

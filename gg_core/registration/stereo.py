@@ -126,7 +126,7 @@ def stereo_sequence(fits: Sequence[np.ndarray], faces: np.ndarray, load: Callabl
     weights = temporal_weights(frames)
     half = frames // 2
     count = len(fits)
-    rounds = options.rounds
+    rounds = options.rounds          # until the first frame sets the grid: coarse images allow fewer (Sweep.depths)
     sweep = Sweep(faces, len(fits[0]), options)
     meshes = [np.asarray(f, np.float64).copy() for f in fits]
     normals: list[np.ndarray | None] = [None] * count
@@ -148,12 +148,15 @@ def stereo_sequence(fits: Sequence[np.ndarray], faces: np.ndarray, load: Callabl
                                     spacing, frame.masks)
 
     def enter(t: int) -> None:
-        nonlocal spacing, depths
+        nonlocal spacing, depths, rounds
         views, body = load(t)
         cameras = [v.camera for v in views]
-        if not depths:          # one depth grid for the sequence, so the frames' curves line up
+        if t == 0:          # one depth grid for the sequence, so the frames' curves line up
             spacing = pixel_footprint(cameras, meshes[t].mean(axis=0))
             depths = sweep.depths(spacing)
+            rounds = len(depths)
+        if not rounds:          # images too coarse for a single round: the fit stands
+            return
         normals[t] = vertex_normals(meshes[t], sweep.faces)
         occluder = RayCaster([(meshes[t], sweep.faces), body])
         facing = smoothed_normals(normals[t], sweep.adj, VISIBILITY_SMOOTHING)
@@ -186,6 +189,8 @@ def stereo_sequence(fits: Sequence[np.ndarray], faces: np.ndarray, load: Callabl
     for step in range(count + rounds * half):
         if step < count:
             timed(step, lambda: enter(step))
+            if not rounds:
+                done(step, meshes[step], logs[step])
         for r in range(rounds):
             t = step - (r + 1) * half
             if 0 <= t < count:

@@ -168,13 +168,15 @@ def test_curvature_gain_scales_the_patches_bend():
     assert np.abs(moved["gain 1"] - moved["flat"]).max() > 2e-5      # measured: 0.08 mm
 
 
-def test_a_round_with_fewer_than_three_depths_moves_nothing():
+def test_rounds_stop_before_one_with_fewer_than_three_depths():
     # coarse images: a late round's range is under two steps (a 40 x 30 px capture hit this with 4 rounds)
     verts, faces = _plane(5, 0.3, 0.0)
-    sweep = Sweep(faces, len(verts), PhotoOptions())
-    for offsets in (np.array([-0.001]), np.array([-0.001, 0.002])):
-        curves = np.tile(np.linspace(0.2, 0.9, len(offsets)), (len(verts), 1))
-        move, log = sweep.solve(curves, np.ones(len(verts)), offsets)
-        assert np.array_equal(move, np.zeros(len(verts))) and log["confident_vertices"] == 0
+    options = PhotoOptions(search_in=0.02, search_out=0.02, rounds=4)
+    sweep = Sweep(faces, len(verts), options)
+    fine = sweep.depths(0.002)
+    assert len(fine) == 4 and all(len(d) >= 3 for d in fine)
+    coarse = sweep.depths(0.02)            # 1 cm steps: 5 depths, then 4 and 3 at 5 and 2.5 mm, then 2: stop
+    assert [len(d) for d in coarse] == [5, 4, 3]
+    assert sweep.depths(0.1) == []          # not even the first round: nothing moves
     move, _ = sweep.solve(np.tile([0.2, 0.9, 0.3], (len(verts), 1)), np.ones(len(verts)), np.array([-1e-3, 0, 1e-3]))
     assert np.all(np.abs(move) < 1e-3) and np.abs(move).max() > 0

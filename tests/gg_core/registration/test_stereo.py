@@ -79,3 +79,15 @@ def test_neighbouring_frames_carry_a_frame_whose_images_show_nothing():
     assert np.abs(pooled[blind][0][:, 2]).mean() < 0.003
     for t in (0, 6):                             # the ends average over fewer frames and still land
         assert np.abs(pooled[t][0][:, 2]).mean() < 0.003
+
+
+def test_images_too_coarse_for_a_round_leave_every_fit_as_it_is():
+    verts, faces = _plane(15, 0.3, 0.0)
+    fits = [verts + [0.0, 0.0, dz] for dz in (0.012, -0.008, 0.006)]
+    spacing = pixel_footprint(_cameras(), fits[0].mean(axis=0))
+    tiny = 0.2 * spacing               # a search range under one half-pixel step: no grid of 3 depths
+    options = PhotoOptions(search_in=tiny, search_out=tiny, rounds=3, stiffness=1.0, aggregate=0)
+    out, order = _run(fits, faces, lambda t: _views(), options, 3)
+    assert order == [0, 1, 2]
+    for t, fit in enumerate(fits):
+        assert np.array_equal(out[t][0], fit) and out[t][1]["rounds"] == []
