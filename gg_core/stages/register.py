@@ -404,14 +404,14 @@ def _refine_and_report(job: SequenceJob, stage1: Stage1, seq: Sequence, collider
     frames, config, out_dir = job.frames, job.config, log_path.parent
     settings = _settings(job.options)
     key = _digest([logs["_fits"], settings["stereo"]])
-    if logs.get("_stereo") != key or not all((out_dir / "refined" / f"{f}.ply").is_file() for f in frames):
+    if logs.get("_stereo") != key or not _all_written(out_dir / "refined", frames):
         refine_sequence(seq, frames, out_dir, stage1.faces, config, collider, logs, step)
         logs["_stereo"] = key
         write_json(log_path, logs)
     else:
         step(f"{seq.name}: stereo unchanged, kept", len(frames))
     key = _digest([key, settings["temporal"]])
-    if logs.get("_temporal") != key or not all((out_dir / "meshes" / f"{f}.ply").is_file() for f in frames):
+    if logs.get("_temporal") != key or not _all_written(out_dir / "meshes", frames):
         smooth_sequence(seq, frames, out_dir, stage1.faces, config, collider, logs)
         logs["_temporal"] = key
         write_json(log_path, logs)
@@ -420,6 +420,10 @@ def _refine_and_report(job: SequenceJob, stage1: Stage1, seq: Sequence, collider
     report["alignment"] = logs.get("_alignment", {})
     _write_renders(seq, frames, out_dir, stage1, job.renders)
     return report
+
+
+def _all_written(folder: Path, frames: list[str]) -> bool:
+    return all((folder / f"{f}.ply").is_file() for f in frames)
 
 
 def _settings(options: dict) -> dict[str, dict]:
