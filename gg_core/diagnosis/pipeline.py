@@ -346,9 +346,9 @@ class _TrialJob:
 
     The refits are independent and each single-threaded, so they fill the cores. Measured (session 14) on the
     Blender test capture (400 vertices, 3 x 16 frames, 13 refits): the whole diagnosis took 583 s in one process
-    (another single-threaded job on the second core) and takes 204 s with 2 workers on the 2 idle cores, its trials
-    451 -> 124 s (with the adjoint's smaller inner budget, physics/fitting.py); the report is the same as in one
-    process (the tests' tilted capture, every field but paths and times)."""
+    (another single-threaded job on the second core); with 2 workers on the 2 idle cores and a halved adjoint
+    budget (not kept, physics/fitting.py) 204 s, its trials 451 -> 124 s. The report is the same as in one process
+    (the tests' tilted capture, every field but paths and times)."""
     name: str | None
     coefs: np.ndarray | None
     sim: ImplicitSimulator
