@@ -18,6 +18,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Sequence, TypeVar
 
+from .errors import InputError
 from .jobs import Progress
 
 J = TypeVar("J")
@@ -32,6 +33,17 @@ _queue = None                         # the worker's progress queue (set by _ini
 def default_workers(jobs: int) -> int:
     """One worker per job, at most one per core."""
     return max(1, min(jobs, os.cpu_count() or 1))
+
+
+def check_workers(requested: int | None) -> None:
+    """A stage's `--workers` (None: one per core) is bad input below 1; checked before the stage's work starts."""
+    if requested is not None and requested < 1:
+        raise InputError(f"--workers must be at least 1, got {requested}", "--workers", "pass 1 or more")
+
+
+def worker_count(requested: int | None, jobs: int) -> int:
+    """The `--workers` asked for, or default_workers."""
+    return default_workers(jobs) if requested is None else requested
 
 
 def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progress: Progress,

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..jobs import Progress
-from ..parallel import Step, default_workers, run_jobs
+from ..parallel import Step, run_jobs, worker_count
 from ..physics.cloth import Cloth
 from ..physics.contact import BodyCollider
 from ..physics.fitting import (BehaviorParams, FitConfig, Observed, fit_behavior, free_rollout, rollout_distance,
@@ -250,8 +250,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     proposed = propose(sel, req.min_inclusion, req.max_trials)
     jobs = [_TrialJob(n, None if n is None else sel.alone[n], sim, ctx if n is None else contexts[n], train, heldout,
                       attached, refit_config, req.probe_acceleration, baseline_l2) for n in [None, *proposed]]
-    workers = req.workers if req.workers is not None else default_workers(len(jobs))
-    null_refit, *refits = run_jobs(_run_trial, jobs, workers, progress)
+    null_refit, *refits = run_jobs(_run_trial, jobs, worker_count(req.workers, len(jobs)), progress)
     null = judge_reference(Trial([], baseline_l2, float("nan"), baseline_train_l2), null_refit)
     before = null.heldout_l2
     trials = dict(zip(proposed, refits))

@@ -41,6 +41,7 @@ from ..diagnosis.noise import SMOOTH_ORDER, SMOOTH_WINDOW, correlated_noise, noi
 from ..errors import InputError
 from ..geometry.meshio import write_ply
 from ..jobs import Progress
+from ..parallel import check_workers
 from ..storage import atomic_path, write_json, write_report
 from .behavior import attached_vertices, hand_mask, split
 from .motion import SIM_VERTICES, garment_files, inputs_key, load_sequence, resolve_source, simulation_mesh
@@ -136,8 +137,7 @@ def load(req: DiagnoseRequest, capture: Capture, names: list[str], source: str) 
 def run_diagnose(req: DiagnoseRequest) -> Path:
     if req.denoise not in DENOISE:
         raise InputError(f"unknown denoise mode '{req.denoise}'", "--denoise", f"choose one of: {', '.join(DENOISE)}")
-    if req.workers is not None and req.workers < 1:
-        raise InputError(f"--workers must be at least 1, got {req.workers}", "--workers", "pass 1 or more")
+    check_workers(req.workers)
     start = time.perf_counter()
     capture = Capture(req.capture)
     train_names, heldout_names = split(capture, list(req.train), list(req.heldout))

@@ -39,7 +39,7 @@ from ..capture.layout import FOREGROUND_MASK, GARMENT_MASK, RGB, Capture, Sequen
 from ..errors import InputError
 from ..geometry.meshio import read_mesh, read_obj, write_ply
 from ..jobs import Progress
-from ..parallel import default_workers, run_jobs
+from ..parallel import check_workers, run_jobs, worker_count
 from ..storage import atomic_path, file_stamps, write_json, write_npz, write_report
 
 STAGE = "register"
@@ -266,8 +266,7 @@ def run_register(req: RegisterRequest) -> Path:
                              "pass a positive count")
         base = TrackerConfig(iterations=req.iterations, first_iterations=max(1, req.iterations * 8 // 3),
                              seed=req.seed)
-    if req.workers is not None and req.workers < 1:
-        raise InputError(f"--workers must be at least 1, got {req.workers}", "--workers", "pass 1 or more")
+    check_workers(req.workers)
     if req.align not in ALIGN_MODES:
         raise InputError(f"unknown alignment '{req.align}'", "--align", f"choose one of {', '.join(ALIGN_MODES)}")
     try:
@@ -293,7 +292,7 @@ def run_register(req: RegisterRequest) -> Path:
     state = texture.state()
     jobs = [SequenceJob(req.capture, project, s.name, frames_of[s.name], state, config, options, req.align,
                         req.icp_scale, req.renders) for s in seqs]
-    workers = req.workers if req.workers is not None else default_workers(len(jobs))
+    workers = worker_count(req.workers, len(jobs))
     tracking = time.perf_counter()
     report = dict(zip(names, run_jobs(register_sequence, jobs, workers, progress, then=refine_next)))
     tracked_frames = sum(len(f) for f in frames_of.values())

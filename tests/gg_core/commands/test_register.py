@@ -52,6 +52,7 @@ def test_help_lists_the_options():
     ("no_body", "body mesh missing for frame '000001'"),
     ("empty_masks", "garment masks of frame '000000' are empty in every camera"),
     ("sequence", "sequence 'nope' not found"),
+    ("workers", "--workers must be at least 1, got 0"),
 ])
 def test_bad_input_exits_2_with_one_line(capture_writer, tmp_path, case, expected):
     capture = capture_writer(tmp_path / "capture")
@@ -66,6 +67,8 @@ def test_bad_input_exits_2_with_one_line(capture_writer, tmp_path, case, expecte
             Image.fromarray(np.zeros((30, 40), np.uint8)).save(capture / "seq0" / cam / "garment_masks" / "000000.png")
     elif case == "sequence":
         args += ["--sequences", "nope"]
+    elif case == "workers":
+        args += ["--workers", "0"]
     out = gg(*args)
     assert out.returncode == 2, out.stderr
     lines = out.stderr.strip().splitlines()
