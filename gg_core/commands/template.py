@@ -25,6 +25,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="voxel size of the visual hull in mm (default: a pixel's footprint, 3-10 mm)")
     parser.add_argument("--no-photo", dest="photo", action="store_false",
                         help="skip the photo-consistency refinement (silhouettes only)")
+    parser.add_argument("--free-border-trim", type=float, default=1.0, metavar="EDGES",
+                        help="edge lengths cut off the borders that hang free of the body, where the silhouettes' "
+                             "hull curls under the garment (a hem; default: 1; 0 keeps them)")
     parser.add_argument("--appearance-iterations", type=int, default=300,
                         help="optimization steps of the initial Gaussian appearance (one view each)")
     add_progress_option(parser)
@@ -38,12 +41,14 @@ def run(args: argparse.Namespace) -> int:
         value = getattr(args, name)
         if value is not None and value <= 0:
             raise InputError(f"--{name.replace('_', '-')} must be positive", f"got {value}", "pass a positive number")
+    if args.free_border_trim < 0:
+        raise InputError("--free-border-trim must not be negative", f"got {args.free_border_trim}", "pass 0 or more")
     if args.appearance_iterations < 0:
         raise InputError("--appearance-iterations must not be negative", f"got {args.appearance_iterations}",
                          "pass 0 or more")
     req = TemplateRequest(capture=args.capture, project=args.project, sequence=args.sequence, frame=args.frame,
                           cameras=args.cameras, vertices=args.vertices, resolution=args.resolution,
-                          voxel_mm=args.voxel_mm, photo=args.photo,
+                          voxel_mm=args.voxel_mm, photo=args.photo, free_border_trim=args.free_border_trim,
                           appearance_iterations=args.appearance_iterations, progress=args.progress)
     report = run_template(req)
     if args.progress != "jsonl":

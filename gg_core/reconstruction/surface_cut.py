@@ -124,16 +124,21 @@ def _border_edges(faces: np.ndarray) -> np.ndarray:
 
 def border_loops(faces: np.ndarray) -> int:
     """Number of closed border loops (a pinched border vertex joins its loops into one)."""
+    return int(border_loop_labels(faces)[1].max(initial=-1)) + 1
+
+
+def border_loop_labels(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """([B] the border vertices, [B] the loop each belongs to, 0 ... loops - 1)."""
     edges = _border_edges(faces)
     if len(edges) == 0:
-        return 0
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
     import scipy.sparse as sp  # noqa: PLC0415
     from scipy.sparse.csgraph import connected_components  # noqa: PLC0415
 
     ids, inverse = np.unique(edges, return_inverse=True)
     inverse = inverse.reshape(-1, 2)
     graph = sp.coo_matrix((np.ones(len(edges)), (inverse[:, 0], inverse[:, 1])), shape=(len(ids), len(ids)))
-    return int(connected_components(graph, directed=False)[0])
+    return ids, connected_components(graph, directed=False)[1]
 
 
 def _border_neighbours(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:

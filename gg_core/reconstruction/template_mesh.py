@@ -7,7 +7,8 @@
 4. Garment vote per vertex, unseen regions and mask noise decided by their surroundings, the vote smoothed,
    the surface cut at vote 0.5 and only the main pieces kept.
 5. Photo-consistency: vertices moved along their normals into the concave regions the hull bridges.
-6. The border tidied (short border edges collapsed, border relaxed), then a last isotropic remesh of the open
+6. The hull's bevel cut off the borders that hang free of the body (a hem; border_bevel.py).
+7. The border tidied (short border edges collapsed, border relaxed), then a last isotropic remesh of the open
    garment (which keeps border vertices) for even triangles.
 """
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from ..capture.cameras import Camera
+from .border_bevel import trim_free_border
 from .isosurface import extract_surface
 from .mask_vote import garment_vote
 from ..geometry.raycast import RayCaster
@@ -41,7 +43,7 @@ MIN_VERTICES = 300           # ... lowered until edges are no shorter than a pix
 # Blur (in voxels) of the fine hull field before marching cubes: closes gaps thinner than a voxel, which
 # otherwise leave tiny tunnels (handles) in the surface; measured on demo 00_walk frame 0: genus 1 -> 0, CD same.
 FIELD_BLUR = 0.7
-GEOMETRY_STEPS = 6             # `step` callbacks of reconstruct_template (5 without photo-consistency)
+GEOMETRY_STEPS = 7             # `step` callbacks of reconstruct_template (6 without photo-consistency)
 FINAL_REMESH_ITERATIONS = 3
 
 
@@ -53,6 +55,7 @@ class TemplateGeometryOptions:
     hole_fraction: float = 0.005       # non-garment islands below this share of the garment's area are filled
     piece_fraction: float = 0.2        # garment pieces below this share of the largest are dropped
     remesh_iterations: int = 10
+    free_border_trim: float = 1.0      # edge lengths cut off the borders that hang free of the body (border_bevel)
     photo: PhotoOptions | None = field(default_factory=PhotoOptions)   # None: no photo-consistency step
 
 
@@ -139,12 +142,17 @@ def reconstruct_template(cameras: Sequence[Camera], foreground: Sequence[np.ndar
         occluder = RayCaster([(rv, rf), *occluders])
         gv, photo_log = refine_along_normals(gv, gf, cameras, images, occluder, footprint, opt.photo)
         lap("photo-consistency")
+    trim_log = None
+    if occluders:          # the body tells which borders hang free
+        gv, gf, trim_log = trim_free_border(gv, gf, occluders, opt.free_border_trim * edge, opt.piece_fraction)
+    lap("free border trim")
     gv, gf = remesh_open(gv, gf, edge, FINAL_REMESH_ITERATIONS)
     lap("final remesh")
     labels = face_components(gf)
     log = {"timings_s": timings, "target_vertices": vertices, "voxel_m": voxel, "pixel_footprint_m": footprint,
            "edge_length_m": edge, "garment_box": [lo.tolist(), hi.tolist()], "coarse_garment_area_m2": garment_area,
            "hull_vertices": len(hv), "remeshed_vertices": len(rv), "photo_consistency": photo_log,
+           "free_border_trim": trim_log,
            "pieces": [{"faces": int((labels == k).sum()), "genus": genus(gf[labels == k])}
                       for k in range(int(labels.max()) + 1)]}
     return TemplateGeometry(gv, gf, log)

@@ -79,6 +79,13 @@ then the temporal filter), CD / p2m (cm) / F@1cm, raw normals -> 3 steps: walk 0
 95.11 -> 0.3467 / 0.3174 / 95.10 %; 6 steps on the walk 0.3255 / 0.2994 / 95.84 %. Not kept (arm swing, with 3
 steps): cameras within 73 degrees for vertices fewer than 3 cameras see (p2m 0.3377 cm), a vertex with no say in its
 own frame given one by its neighbours' (walk 0.3011 cm), min_score 0.35 / 0.1 (0.3369 / 0.3375 cm).
+
+Measured and not kept (session 15, the same fits): the camera pairs chosen once per vertex (the better half by
+their peak score) instead of at each depth, so that pairs with a short baseline, whose curves are flat, do not
+fill the wrong depths: arm swing 0.3638 / 0.3371 / 94.24 -> 0.3630 / 0.3354 / 94.27 %, walk 0.3249 / 0.2990 /
+95.85 -> 0.3261 / 0.2994 / 95.79 %, torso twist 0.3467 / 0.3174 / 95.10 -> 0.3469 / 0.3170 / 95.09 % (from the
+session's trimmed template's fits, arm swing 0.3194 -> 0.3186 cm p2m); with a third or 70 % of the pairs 0.3357 /
+0.3377 cm on arm swing; pairs weighted by the sine of their rays' angle 0.3384 cm (fixed pairs: 0.3367 cm).
 """
 
 from __future__ import annotations
@@ -149,6 +156,8 @@ def stereo_sequence(fits: Sequence[np.ndarray], faces: np.ndarray, load: Callabl
 
     def enter(t: int) -> None:
         nonlocal spacing, depths, rounds
+        if t > 0 and not rounds:          # frame 0's cameras allowed no round: the other frames' images are not needed
+            return
         views, body = load(t)
         cameras = [v.camera for v in views]
         if t == 0:          # one depth grid for the sequence, so the frames' curves line up

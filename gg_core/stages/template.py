@@ -48,6 +48,7 @@ class TemplateRequest:
     resolution: int | None = None        # Gaussian texture side; default: from the pixel footprint
     voxel_mm: float | None = None        # default: one pixel footprint, 3-10 mm
     photo: bool = True                   # photo-consistency refinement of the silhouette geometry
+    free_border_trim: float = 1.0        # edge lengths cut off borders that hang free of the body (the hull's bevel)
     appearance_iterations: int = 300
     progress: str = "bar"
 
@@ -92,7 +93,7 @@ def inputs_key(req: TemplateRequest, seq: Sequence, frame: str, camera_ids: list
 
 def geometry_part(key: dict) -> dict:
     """The part of the inputs key the mesh depends on (not the appearance options)."""
-    geometry_options = ("vertices", "voxel_mm", "photo", "cameras", "sequence", "frame")
+    geometry_options = ("vertices", "voxel_mm", "photo", "free_border_trim", "cameras", "sequence", "frame")
     return {**key, "options": {k: v for k, v in key["options"].items() if k in geometry_options}}
 
 
@@ -151,7 +152,8 @@ def run_template(req: TemplateRequest) -> Path:
     else:
         options = TemplateGeometryOptions(vertices=req.vertices,
                                           voxel=None if req.voxel_mm is None else req.voxel_mm * 1e-3,
-                                          photo=PhotoOptions() if req.photo else None)
+                                          photo=PhotoOptions() if req.photo else None,
+                                          free_border_trim=req.free_border_trim)
         try:
             geometry = reconstruct_template(
                 [v.camera for v in views], [v.background.numpy() < 0.5 for v in views],

@@ -26,7 +26,8 @@ def _blank_garment(capture: Path, cameras: list[str]) -> None:
 def test_help_lists_the_options():
     out = gg("template", "--help")
     assert out.returncode == 0
-    for option in ("--project", "--sequence", "--frame", "--vertices", "--resolution", "--progress"):
+    for option in ("--project", "--sequence", "--frame", "--vertices", "--resolution", "--free-border-trim",
+                   "--progress"):
         assert option in out.stdout
 
 
@@ -36,6 +37,7 @@ def test_help_lists_the_options():
     ("no_cameras", "cameras.json holds no cameras"),
     ("empty_masks", "garment masks of frame '000000' are empty in every camera"),
     ("few_cameras", "visible in only 2 camera(s)"),
+    ("negative_trim", "--free-border-trim must not be negative"),
 ])
 def test_bad_input_exits_2_with_one_line(capture_writer, tmp_path, case, expected):
     capture = capture_writer(tmp_path / "capture")
@@ -50,6 +52,8 @@ def test_bad_input_exits_2_with_one_line(capture_writer, tmp_path, case, expecte
         _blank_garment(capture, ["cam00", "cam01", "cam02"])
     elif case == "few_cameras":
         _blank_garment(capture, ["cam00"])
+    elif case == "negative_trim":
+        args += ["--free-border-trim", "-1"]
     out = gg(*args)
     assert out.returncode == 2, out.stderr
     lines = out.stderr.strip().splitlines()

@@ -87,7 +87,9 @@ def test_images_too_coarse_for_a_round_leave_every_fit_as_it_is():
     spacing = pixel_footprint(_cameras(), fits[0].mean(axis=0))
     tiny = 0.2 * spacing               # a search range under one half-pixel step: no grid of 3 depths
     options = PhotoOptions(search_in=tiny, search_out=tiny, rounds=3, stiffness=1.0, aggregate=0)
-    out, order = _run(fits, faces, lambda t: _views(), options, 3)
+    loaded = []
+    out, order = _run(fits, faces, lambda t: (loaded.append(t), _views())[1], options, 3)
     assert order == [0, 1, 2]
+    assert loaded == [0]               # frame 0's cameras set the grid; no other frame's images are read
     for t, fit in enumerate(fits):
         assert np.array_equal(out[t][0], fit) and out[t][1]["rounds"] == []

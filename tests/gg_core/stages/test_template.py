@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import time
 
 import numpy as np
@@ -72,6 +73,21 @@ def test_rerun_skips_and_appearance_change_keeps_the_mesh(template_project):
     report = json.loads(run_template(req2).read_text())
     assert obj.stat().st_mtime_ns == before[1]             # geometry reused
     assert report["appearance"]["iterations"] == 5 and report["inputs"]["options"]["appearance_iterations"] == 5
+
+
+def test_the_free_hem_is_trimmed_and_the_trim_width_is_a_geometry_input(template_project, tmp_path):
+    req, report_path = template_project
+    trim = json.loads((req.project / "stage1" / "geometry.json").read_text())["log"]["free_border_trim"]
+    assert trim["free_border_vertices"] > 0 and 0.0 < trim["area_removed_share"] < 0.1     # the hem, not the waist
+    project = tmp_path / "project"
+    shutil.copytree(req.project, project)
+    untrimmed = TemplateRequest(capture=req.capture, project=project, appearance_iterations=10,
+                                free_border_trim=0.0, progress="none")
+    run_template(untrimmed)                                # the width changed: the mesh is rebuilt, untrimmed
+    log = json.loads((project / "stage1" / "geometry.json").read_text())["log"]
+    assert log["free_border_trim"]["width_m"] == 0.0 and "area_removed_share" not in log["free_border_trim"]
+    kept, trimmed = (read_mesh(p / "stage1" / "template.obj")[0] for p in (project, req.project))
+    assert len(kept) > len(trimmed) and kept[:, 1].min() < trimmed[:, 1].min()   # the hem reaches lower
 
 
 def test_photo_consistency_lowers_the_error_of_the_silhouette_template(tiny_capture):
