@@ -60,8 +60,7 @@ def free_border(verts: np.ndarray, faces: np.ndarray, bodies: Sequence[tuple[np.
 
 
 def trim_free_border(verts: np.ndarray, faces: np.ndarray, bodies: Sequence[tuple[np.ndarray, np.ndarray]],
-                     width: float,
-                     piece_fraction: float = 0.2) -> tuple[np.ndarray, np.ndarray, dict]:
+                     width: float, piece_fraction: float = 0.2) -> tuple[np.ndarray, np.ndarray, dict]:
     """(verts, faces, log): the band within `width` (m, along the surface's edges) of the free border loops
     (free_border) cut off along the level line of that distance."""
     free = free_border(verts, faces, bodies)
