@@ -36,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
+from ..geometry.topology import build_topology
 from ..metrics.surface import point_to_mesh
 from .mesh_graph import vertex_area
 from .surface_cut import border_loop_labels, cut_at_level, main_pieces
@@ -67,8 +68,7 @@ def trim_free_border(verts: np.ndarray, faces: np.ndarray, bodies: Sequence[tupl
     log = {"width_m": width, "free_border_vertices": int(free.sum())}
     if width <= 0 or not free.any():
         return verts, faces, log
-    a, b = np.unique(np.sort(np.stack([faces.ravel(), np.roll(faces, -1, axis=1).ravel()], axis=1), axis=1),
-                     axis=0).T
+    a, b = build_topology(faces, len(verts)).edges.T
     length = np.linalg.norm(verts[a] - verts[b], axis=1)
     graph = sp.coo_matrix((length, (a, b)), shape=(len(verts), len(verts))).tocsr()
     distance = dijkstra(graph, directed=False, indices=np.flatnonzero(free), min_only=True, limit=3.0 * width)
@@ -77,4 +77,3 @@ def trim_free_border(verts: np.ndarray, faces: np.ndarray, bodies: Sequence[tupl
                                piece_fraction)
     log["area_removed_share"] = float(1.0 - vertex_area(out_v, out_f).sum() / area)
     return out_v, out_f, log
-
