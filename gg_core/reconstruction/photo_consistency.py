@@ -95,6 +95,8 @@ from .patch_kernels import normalized_patches
 from .visual_hull import bilinear
 
 _VERTEX_CHUNK = 1024
+WEIGHTINGS = ("score", "snr")
+SNR_SCORE_CAP = 0.98          # a score of 1 would weigh infinitely: 0.98 weighs 49
 
 
 @dataclass
@@ -112,6 +114,24 @@ class PhotoOptions:
     pair_share: float = 0.5      # each depth scored by the better half of the camera pairs (module docstring)
     curved: bool = True          # patches bent to the mesh's local quadric (module docstring); False: tangent plane
     curvature_gain: float = 2.0  # the quadric's curvature times this: the mesh is flatter than the cloth (docstring)
+    weighting: str = "score"     # a vertex's weight in the offset field: its peak score, or "snr" (fit_weights)
+
+    def __post_init__(self) -> None:
+        if self.weighting not in WEIGHTINGS:
+            raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
+
+
+def fit_weights(score: np.ndarray, weighting: str) -> np.ndarray:
+    """Each vertex's weight in the offset field from its peak NCC `score`: the score itself ("score"), or its
+    signal-to-noise ratio score / (1 - score) ("snr"; scores capped at SNR_SCORE_CAP). Why the ratio: a patch
+    correlation rho between two noisy views of one texture has signal-to-noise power rho / (1 - rho), and the
+    precision of its peak grows with it; so a clear match (0.9: 9) outweighs a mediocre one (0.6: 1.5) six
+    times where the score weighs it 1.5 times. Measured in registration/stereo.py; the template's sweep keeps the
+    score (template_mesh)."""
+    if weighting == "snr":
+        capped = np.minimum(score, SNR_SCORE_CAP)
+        return capped / (1.0 - capped)
+    return score
 
 
 def visible_cameras(verts: np.ndarray, normals: np.ndarray, cameras: Sequence[Camera], occluder: RayCaster,
@@ -290,14 +310,14 @@ class Sweep:
 
     def solve(self, curves: np.ndarray, weight: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, dict]:
         """([V] move along the normals: the curves' sub-step peaks fitted by an offset field as stiff as the
-        options say, each vertex weighted by its peak score where `weight` > 0.5 and the score > min_score;
-        the round's log). `offsets` is one of `depths`' grids (3 depths or more)."""
+        options say, each vertex weighted by fit_weights of its peak score where `weight` > 0.5 and the score >
+        min_score; the round's log). `offsets` is one of `depths`' grids (3 depths or more)."""
         opt = self.options
         step = offsets[1] - offsets[0]
         best = np.argmax(curves, axis=1)
         target = offsets[best] + step * _parabola_peak(curves, best)
         confidence = np.where(weight > 0.5, np.max(curves, axis=1), 0.0)
-        w = np.where(confidence > opt.min_score, confidence, 0.0)
+        w = np.where(confidence > opt.min_score, fit_weights(confidence, opt.weighting), 0.0)
         system = (sp.diags(w) + opt.stiffness * self.lap + sp.identity(len(w)) * 1e-6).tocsc()
         move = sp.linalg.spsolve(system, w * target)
         confident = w > 0

@@ -86,6 +86,28 @@ fill the wrong depths: arm swing 0.3638 / 0.3371 / 94.24 -> 0.3630 / 0.3354 / 94
 95.85 -> 0.3261 / 0.2994 / 95.79 %, torso twist 0.3467 / 0.3174 / 95.10 -> 0.3469 / 0.3170 / 95.09 % (from the
 session's trimmed template's fits, arm swing 0.3194 -> 0.3186 cm p2m); with a third or 70 % of the pairs 0.3357 /
 0.3377 cm on arm swing; pairs weighted by the sine of their rays' angle 0.3384 cm (fixed pairs: 0.3367 cm).
+
+Each vertex weighted by its peak's signal-to-noise ratio (session 16, 2026-11-27; photo_consistency.fit_weights).
+The offset field weighed each vertex by its peak score c, so a clear match (0.9) counted 1.5 times a mediocre one
+(0.6); weighed by c / (1 - c), the signal-to-noise ratio of a correlation between two noisy views, it counts 6
+times. Measured on a fresh synthesis of the demo capture (its template 0.424 cm where session 15's copy gave
+0.421; stage 2 with the score weights 0.339 / 0.309 / 95.40 %), this step and the temporal filter rerun over its
+stored fits, CD / p2m (cm) / F@1cm, walk and torso twist (arm swing kept aside):
+- score weights (before): 0.3270 / 0.2981 / 95.77 % and 0.3383 / 0.3066 / 95.55 %;
+- the score squared: walk 0.3273 / 0.2947 / 95.70 %; a ramp (c - 0.4) / 0.6: 0.3270 / 0.2938 / 95.68 % and
+  0.3396 / 0.3041 / 95.48 % (0.3 / 0.5: p2m 0.2950 / 0.2934 cm, CD 0.3265 / 0.3289 cm): p2m gains, CD and F lose;
+- SNR weights with stiffness 2 / 4 / 6 / 8: walk 0.3282 / 0.3058 / 95.78, 0.3242 / 0.2944 / 95.82, 0.3260 /
+  0.2929 / 95.71, 0.3295 / 0.2945 / 95.57 %; twist at 2 / 4: 0.3388 / 0.3157 / 95.67, 0.3358 / 0.3045 / 95.67 %;
+- with them, patches bent to 1.25 times the quadric instead of 1.5 (kept): 0.3244 / 0.2932 / 95.75 % and
+  0.3363 / 0.3034 / 95.63 % (2: walk 0.3279 / 0.3012 / 95.91 %); arm swing, kept aside, 0.3514 / 0.3237 / 94.87 ->
+  0.3515 / 0.3205 / 94.81 %. `gg register` over the stored fits gives the same (mean 0.339 / 0.309 / 95.40 ->
+  0.337 / 0.306 / 95.40 %).
+Not kept: the pairs' NCCs averaged as Fisher z (atanh) with SNR weights: 0.3233 / 0.2946 / 95.86 % and 0.3353 /
+0.3049 / 95.72 %; with score weights, on the walk: each vertex's weight times min(cameras, 4) / 4 (p2m 0.2978
+cm), the border ring or its two rings given no say (0.2991 / 0.3006 cm), 7 frames (0.2987 cm), 5 rounds (0.2982
+cm), stiffness 1.5 (0.2976 cm), gain 1 / 1.25 (0.2977 / 0.2974 cm). The template's sweep keeps the score weights
+(SNR weights at stiffness 8 / 16: 0.4255 / 0.3579 / 90.54 % and 0.4589 / 0.3820 / 89.06 % against 0.4243 / 0.3634 /
+91.07 %).
 """
 
 from __future__ import annotations

@@ -61,6 +61,7 @@ import torch
 
 from ..gaussians.texture import GaussianTexture
 from ..physics.contact import BodyCollider
+from ..reconstruction.photo_consistency import WEIGHTINGS
 from .appearance import contrast_background
 from .losses import Bending, BodyTerm, Strain, virtual_edges
 from .photometric import view_colors, view_loss, visible_gaussians
@@ -96,9 +97,10 @@ class TrackerConfig:
     stop_patience: int = 20            # ... for this many iterations in the fine phase (0 m: never stop early)
     stereo_rounds: int = 4             # photo-consistency rounds over the fits (stage 2, stereo.py; 0: none) ...
     stereo_search: float = 0.02        # ... searching this far (m) along the normals either way ...
-    stereo_stiffness: float = 1.0      # ... with an offset field this stiff (the template's: 2) ...
+    stereo_weighting: str = "snr"      # ... each vertex weighted by its peak's signal-to-noise ratio (stereo.py) ...
+    stereo_stiffness: float = 4.0      # ... in an offset field this stiff (4 with "snr" = 1 with "score") ...
     stereo_aggregate: int = 0          # ... score curves averaged over this many neighbour steps (template: 2) ...
-    stereo_curvature_gain: float = 1.5  # ... patches bent to this times the mesh's curvature (stereo.py) ...
+    stereo_curvature_gain: float = 1.25  # ... patches bent to this times the mesh's curvature (stereo.py) ...
     stereo_frames: int = 5             # ... and score curves averaged over this many frames (odd; stereo.py)
     smooth_window: int = 7             # frames of the finished sequence's temporal filter (temporal.py; 1: none) ...
     smooth_order: int = 2              # ... and its polynomial order
@@ -108,6 +110,8 @@ class TrackerConfig:
         for name in ("ve", "body"):
             if getattr(self, name) not in SCHEDULES:
                 raise ValueError(f"{name} schedule must be one of {SCHEDULES}, got {getattr(self, name)!r}")
+        if self.stereo_weighting not in WEIGHTINGS:
+            raise ValueError(f"stereo_weighting must be one of {WEIGHTINGS}, got {self.stereo_weighting!r}")
         if self.stereo_frames < 1 or self.stereo_frames % 2 == 0:
             raise ValueError(f"stereo_frames must be a positive odd frame count, got {self.stereo_frames}")
 

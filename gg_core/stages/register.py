@@ -469,7 +469,8 @@ def refine_sequence(seq: Sequence, frames: list[str], out_dir: Path, faces: np.n
         return
     options = PhotoOptions(search_in=config.stereo_search, search_out=config.stereo_search,
                            rounds=config.stereo_rounds, stiffness=config.stereo_stiffness,
-                           aggregate=config.stereo_aggregate, curvature_gain=config.stereo_curvature_gain)
+                           aggregate=config.stereo_aggregate, curvature_gain=config.stereo_curvature_gain,
+                           weighting=config.stereo_weighting)
     stereo_sequence(fits, faces, load, options, config.stereo_frames, done)
 
 

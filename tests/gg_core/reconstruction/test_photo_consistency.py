@@ -1,8 +1,10 @@
 import numpy as np
+import pytest
 
 from gg_core.geometry.raycast import RayCaster
-from gg_core.reconstruction.photo_consistency import (PhotoOptions, Sweep, local_quadrics, refine_along_normals,
-                                                      sweep_scores, tangent_frames, visible_cameras)
+from gg_core.reconstruction.photo_consistency import (PhotoOptions, Sweep, fit_weights, local_quadrics,
+                                                      refine_along_normals, sweep_scores, tangent_frames,
+                                                      visible_cameras)
 from gg_core.reconstruction.mesh_graph import adjacency, vertex_normals
 
 from .scenes import cylinder_image, pixel_rays, plane_image, sphere_mesh
@@ -180,3 +182,25 @@ def test_rounds_stop_before_one_with_fewer_than_three_depths():
     assert sweep.depths(0.1) == []          # not even the first round: nothing moves
     move, _ = sweep.solve(np.tile([0.2, 0.9, 0.3], (len(verts), 1)), np.ones(len(verts)), np.array([-1e-3, 0, 1e-3]))
     assert np.all(np.abs(move) < 1e-3) and np.abs(move).max() > 0
+
+
+def test_snr_weights_grow_with_the_score_as_its_signal_to_noise_ratio():
+    np.testing.assert_allclose(fit_weights(np.array([0.5, 0.9, 0.99]), "snr"), [1.0, 9.0, 49.0])
+    np.testing.assert_allclose(fit_weights(np.array([0.5, 0.9]), "score"), [0.5, 0.9])
+    with pytest.raises(ValueError, match="weighting"):
+        PhotoOptions(weighting="sharpness")
+
+
+def test_snr_weighting_lets_a_clear_match_outweigh_a_mediocre_one():
+    # half the vertices see a clear peak 1 mm out (0.95), half a mediocre one 1 mm in (0.6); a stiff field
+    # moves them together by the weighted mean: the score weighs the clear half 1.6x, the SNR 12.7x
+    verts, faces = _plane(6, 0.3, 0.0)
+    offsets = np.array([-1e-3, 0.0, 1e-3])
+    clear = np.arange(len(verts)) % 2 == 0
+    curves = np.where(clear[:, None], [0.2, 0.5, 0.95], [0.6, 0.3, 0.1])
+    move = {}
+    for weighting in ("score", "snr"):
+        sweep = Sweep(faces, len(verts), PhotoOptions(stiffness=1e3, weighting=weighting))
+        move[weighting] = sweep.solve(curves, np.ones(len(verts)), offsets)[0]
+    np.testing.assert_allclose(move["score"], 1e-3 * (0.95 - 0.6) / 1.55, atol=2e-5)
+    np.testing.assert_allclose(move["snr"], 1e-3 * (19 - 1.5) / 20.5, atol=2e-5)
