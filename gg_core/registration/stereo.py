@@ -123,10 +123,11 @@ steps walk 0.3263 / 0.2915 / 95.58 %); pair shares 0.35 / 0.7 (walk 0.3244 / 0.2
 95.92 % and 0.3229 / 0.2933 / 95.93 %, twist at 55: 0.3354 / 0.3025 / 95.59 %); 5 rounds (walk p2m 0.2919 cm);
 patches weighted by a Gaussian of 0.85 samples instead of 1 (walk 0.3215 / 0.2905 / 95.92 %, twist 0.3330 /
 0.2998 / 95.65 %, but arm swing 0.3509 / 0.3201 / 94.81 %; 0.75 on the walk: 0.3229 / 0.2920 / 95.92 %; 7 samples
-at 1.3: 0.3339 / 0.3057 / 95.63 %); with score weights, on the walk: each vertex's weight times min(cameras, 4) / 4 (p2m 0.2978 cm), the border ring or
-its two rings given no say (0.2991 / 0.3006 cm), 7 frames (0.2987 cm), 5 rounds (0.2982 cm), stiffness 1.5
-(0.2976 cm), gain 1 / 1.25 (0.2977 / 0.2974 cm). The template's sweep keeps the score weights (SNR weights at
-stiffness 8 / 16: 0.4255 / 0.3579 / 90.54 % and 0.4589 / 0.3820 / 89.06 % against 0.4243 / 0.3634 / 91.07 %).
+at 1.3: 0.3339 / 0.3057 / 95.63 %); with score weights, on the walk: each vertex's weight times min(cameras, 4) /
+4 (p2m 0.2978 cm), the border ring or its two rings given no say (0.2991 / 0.3006 cm), 7 frames (0.2987 cm), 5
+rounds (0.2982 cm), stiffness 1.5 (0.2976 cm), gain 1 / 1.25 (0.2977 / 0.2974 cm). The template's sweep keeps
+the score weights (SNR weights at stiffness 8 / 16: 0.4255 / 0.3579 / 90.54 % and 0.4589 / 0.3820 / 89.06 %
+against 0.4243 / 0.3634 / 91.07 %).
 """
 
 from __future__ import annotations
