@@ -117,8 +117,13 @@ class PhotoOptions:
     weighting: str = "score"     # a vertex's weight in the offset field: its peak score, or "snr" (fit_weights)
 
     def __post_init__(self) -> None:
-        if self.weighting not in WEIGHTINGS:
-            raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
+        check_weighting(self.weighting, "weighting")
+
+
+def check_weighting(weighting: str, option: str) -> None:
+    """ValueError unless `weighting` is one of WEIGHTINGS; `option` names where it was set, for the message."""
+    if weighting not in WEIGHTINGS:
+        raise ValueError(f"{option} must be one of {WEIGHTINGS}, got {weighting!r}")
 
 
 def fit_weights(score: np.ndarray, weighting: str) -> np.ndarray:

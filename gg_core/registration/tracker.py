@@ -61,7 +61,7 @@ import torch
 
 from ..gaussians.texture import GaussianTexture
 from ..physics.contact import BodyCollider
-from ..reconstruction.photo_consistency import WEIGHTINGS
+from ..reconstruction.photo_consistency import check_weighting
 from .appearance import contrast_background
 from .losses import Bending, BodyTerm, Strain, virtual_edges
 from .photometric import view_colors, view_loss, visible_gaussians
@@ -110,8 +110,7 @@ class TrackerConfig:
         for name in ("ve", "body"):
             if getattr(self, name) not in SCHEDULES:
                 raise ValueError(f"{name} schedule must be one of {SCHEDULES}, got {getattr(self, name)!r}")
-        if self.stereo_weighting not in WEIGHTINGS:
-            raise ValueError(f"stereo_weighting must be one of {WEIGHTINGS}, got {self.stereo_weighting!r}")
+        check_weighting(self.stereo_weighting, "stereo_weighting")
         if self.stereo_frames < 1 or self.stereo_frames % 2 == 0:
             raise ValueError(f"stereo_frames must be a positive odd frame count, got {self.stereo_frames}")
 
