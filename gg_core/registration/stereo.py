@@ -128,6 +128,18 @@ at 1.3: 0.3339 / 0.3057 / 95.63 %); with score weights, on the walk: each vertex
 rounds (0.2982 cm), stiffness 1.5 (0.2976 cm), gain 1 / 1.25 (0.2977 / 0.2974 cm). The template's sweep keeps
 the score weights (SNR weights at stiffness 8 / 16: 0.4255 / 0.3579 / 90.54 % and 0.4589 / 0.3820 / 89.06 %
 against 0.4243 / 0.3634 / 91.07 %).
+
+Normals smoothed over 10 steps (session 17, 2026-11-27; PhotoOptions.normal_smoothing, photo_consistency's
+docstring): the sweep moves each vertex along, and faces its patches to, its normal smoothed over the mesh instead
+of its own, which carries the tilt of wrinkles smaller than a patch (and at the front of the demo template's hem a
+crumpled flap whose normals point every way: walk frame 0's lowest rings in front were 13.6 mm off against 4.9 mm
+at frame 4). The same fits (session 16's final run), the step and the filter rerun, CD / p2m (cm) / F@1cm, walk /
+torso twist / arm swing (kept aside), from 0.3223 / 0.2915 / 95.88 %, 0.3334 / 0.3003 / 95.69 %, 0.3498 / 0.3188
+/ 94.85 %: 3 steps 0.3165 / 0.2840 / 96.09, 0.3274 / 0.2929 / 95.83, 0.3450 / 0.3133 / 95.00 %; 6 steps 0.3146 /
+0.2810 / 96.13, 0.3257 / 0.2902 / 95.85 %; 10 steps 0.3136 / 0.2785 / 96.11, 0.3253 / 0.2882 / 95.82, 0.3435 /
+0.3091 / 94.97 % (kept); 16 steps 0.3123 / 0.2744 / 96.08, 0.3270 / 0.2885 / 95.76 %; 25 steps 0.3138 / 0.2750 /
+96.00, 0.3293 / 0.2895 / 95.70 %. Which cameras see a vertex is still decided with its own normal smoothed over
+VISIBILITY_SMOOTHING steps.
 """
 
 from __future__ import annotations
@@ -222,9 +234,9 @@ def stereo_sequence(fits: Sequence[np.ndarray], faces: np.ndarray, load: Callabl
             rounds = len(depths)
         if not rounds:          # images too coarse for a single round: the fit stands
             return
-        normals[t] = vertex_normals(meshes[t], sweep.faces)
+        normals[t] = sweep.normals(meshes[t])
         occluder = RayCaster([(meshes[t], sweep.faces), body])
-        facing = smoothed_normals(normals[t], sweep.adj, VISIBILITY_SMOOTHING)
+        facing = smoothed_normals(vertex_normals(meshes[t], sweep.faces), sweep.adj, VISIBILITY_SMOOTHING)
         seen = visible_cameras(meshes[t], facing, cameras, occluder, options.min_cosine, spacing)
         logs[t]["cameras_per_vertex"] = float(seen.sum(axis=0).mean())
         held[t] = _Frame(cameras, [v.rgb.numpy() for v in views], [v.garment.numpy() for v in views], seen)
@@ -239,7 +251,7 @@ def stereo_sequence(fits: Sequence[np.ndarray], faces: np.ndarray, load: Callabl
         logs[t]["rounds"].append(log)
         curves.pop((t - half, r), None)          # frames after t no longer need it
         if r + 1 < rounds:
-            normals[t] = vertex_normals(meshes[t], sweep.faces)
+            normals[t] = sweep.normals(meshes[t])
             score(t, r + 1)
         else:
             del held[t]

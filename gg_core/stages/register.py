@@ -32,6 +32,7 @@ import json
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -41,6 +42,10 @@ from ..geometry.meshio import read_mesh, read_obj, write_ply
 from ..jobs import Progress
 from ..parallel import check_workers, run_jobs, worker_count
 from ..storage import atomic_path, file_stamps, write_json, write_npz, write_report
+
+if TYPE_CHECKING:   # numba kernels and torch are imported when a stage runs, not with the CLI
+    from ..reconstruction.photo_consistency import PhotoOptions
+    from ..registration.tracker import TrackerConfig
 
 STAGE = "register"
 ICP_CLOUD_VERTICES = 2000    # points of the first frame's reconstruction that ICP aligns to
@@ -440,7 +445,6 @@ def refine_sequence(seq: Sequence, frames: list[str], out_dir: Path, faces: np.n
     frame's body; each frame's log gets the step's ("stereo"). No rounds: the fits as they are."""
     import torch  # noqa: PLC0415
 
-    from ..reconstruction.photo_consistency import PhotoOptions  # noqa: PLC0415
     from ..registration.losses import BodyTerm  # noqa: PLC0415
     from ..registration.stereo import stereo_sequence  # noqa: PLC0415
     from ..registration.tracker import pushed_out  # noqa: PLC0415
@@ -467,11 +471,17 @@ def refine_sequence(seq: Sequence, frames: list[str], out_dir: Path, faces: np.n
         for t, verts in enumerate(fits):
             done(t, verts, {"rounds": [], "seconds": 0.0, "cpu_seconds": 0.0})
         return
-    options = PhotoOptions(search_in=config.stereo_search, search_out=config.stereo_search,
-                           rounds=config.stereo_rounds, stiffness=config.stereo_stiffness,
-                           aggregate=config.stereo_aggregate, curvature_gain=config.stereo_curvature_gain,
-                           weighting=config.stereo_weighting)
-    stereo_sequence(fits, faces, load, options, config.stereo_frames, done)
+    stereo_sequence(fits, faces, load, stereo_options(config), config.stereo_frames, done)
+
+
+def stereo_options(config: TrackerConfig) -> PhotoOptions:
+    """The photo-consistency options of the stereo step from a TrackerConfig's stereo_* settings."""
+    from ..reconstruction.photo_consistency import PhotoOptions  # noqa: PLC0415
+
+    return PhotoOptions(search_in=config.stereo_search, search_out=config.stereo_search,
+                        rounds=config.stereo_rounds, stiffness=config.stereo_stiffness,
+                        aggregate=config.stereo_aggregate, curvature_gain=config.stereo_curvature_gain,
+                        weighting=config.stereo_weighting, normal_smoothing=config.stereo_normal_smoothing)
 
 
 def smooth_sequence(seq: Sequence, frames: list[str], out_dir: Path, faces: np.ndarray, config, collider,

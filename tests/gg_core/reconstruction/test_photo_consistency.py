@@ -204,3 +204,43 @@ def test_snr_weighting_lets_a_clear_match_outweigh_a_mediocre_one():
         move[weighting] = sweep.solve(curves, np.ones(len(verts)), offsets)[0]
     np.testing.assert_allclose(move["score"], 1e-3 * (0.95 - 0.6) / 1.55, atol=2e-5)
     np.testing.assert_allclose(move["snr"], 1e-3 * (19 - 1.5) / 20.5, atol=2e-5)
+
+
+def _wrinkled_plane(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A 15 x 15 plane mesh with 4 mm of vertex noise in height: wrinkles smaller than a patch, which tilt each
+    vertex's own normal by about 7 degrees."""
+    verts, faces = _plane(15, 0.3, 0.0)
+    if vertex_normals(verts, faces)[0, 2] < 0:
+        faces = faces[:, ::-1]
+    verts[:, 2] += np.random.default_rng(seed).normal(0.0, 0.004, len(verts))
+    return verts, faces
+
+
+def test_sweep_normals_are_the_vertex_normals_smoothed_over_the_set_steps():
+    verts, faces = _wrinkled_plane()
+    raw = Sweep(faces, len(verts), PhotoOptions(normal_smoothing=0)).normals(verts)
+    np.testing.assert_allclose(raw, vertex_normals(verts, faces))
+    smoothed = Sweep(faces, len(verts), PhotoOptions(normal_smoothing=10)).normals(verts)
+    np.testing.assert_allclose(np.linalg.norm(smoothed, axis=1), 1.0)
+    inner = (np.abs(verts[:, 0]) < 0.1) & (np.abs(verts[:, 1]) < 0.1)
+    tilt = {name: np.degrees(np.arccos(np.clip(n[inner, 2], -1, 1))).mean() for name, n in
+            (("raw", raw), ("smoothed", smoothed))}
+    assert tilt["raw"] > 5.0 and tilt["smoothed"] < 0.3 * tilt["raw"]
+
+
+def test_smoothed_normals_carry_a_wrinkled_mesh_onto_the_plane_without_sliding_it_sideways():
+    # the mesh starts 2 cm in front of the textured plane: moved along each vertex's own (tilted) normal, the
+    # vertices slide sideways and land unevenly; along the smoothed normals they come down together
+    cams = _cameras()
+    images = [plane_image(c) for c in cams]
+    verts, faces = _wrinkled_plane()
+    start = verts + [0.0, 0.0, 0.02]
+    far = RayCaster([(np.array([[9.0, 9, 9], [9.1, 9, 9], [9, 9.1, 9]]), np.array([[0, 1, 2]]))])  # occludes nothing
+    result = {}
+    for steps in (0, 10):
+        moved, _ = refine_along_normals(start, faces, cams, images, far, 0.005,
+                                        PhotoOptions(search_in=0.04, normal_smoothing=steps))
+        inner = (np.abs(moved[:, 0]) < 0.1) & (np.abs(moved[:, 1]) < 0.1)
+        result[steps] = (moved[inner, 2].mean(), np.linalg.norm(moved[inner, :2] - start[inner, :2], axis=1).mean())
+    assert abs(result[10][0]) < 0.001          # come down the 2 cm (the 4 mm noise stays: the field is smooth)
+    assert result[10][1] < 0.25 * result[0][1]

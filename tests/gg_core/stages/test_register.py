@@ -15,7 +15,8 @@ import torch
 from gg_core.capture.layout import Capture
 from gg_core.commands.bench_register import _copy_stage1
 from gg_core.geometry.meshio import read_mesh, read_obj
-from gg_core.stages.register import RegisterRequest, _settings, load_stage1, registration_texture, run_register
+from gg_core.stages.register import (RegisterRequest, _settings, load_stage1, registration_texture, run_register,
+                                     stereo_options)
 from gg_core.stages.template import TemplateRequest, run_template
 
 pytestmark = pytest.mark.slow
@@ -126,6 +127,20 @@ def test_sequences_registered_in_parallel_workers_match_one_after_another(tiny_c
     for seq, frames in meshes[1].items():
         for one, two in zip(frames, meshes[2][seq]):
             assert np.abs(one - two).max() < 1e-3       # metres (measured on the dev machine: identical)
+
+
+def test_stereo_options_carry_every_stereo_setting_of_the_tracker_config():
+    from dataclasses import replace
+
+    from gg_core.registration.tracker import TrackerConfig
+
+    config = replace(TrackerConfig(), stereo_rounds=2, stereo_search=0.03, stereo_weighting="score",
+                     stereo_stiffness=1.5, stereo_aggregate=1, stereo_curvature_gain=2.0, stereo_normal_smoothing=4)
+    options = stereo_options(config)
+    assert (options.search_in, options.search_out, options.rounds) == (0.03, 0.03, 2)
+    assert (options.weighting, options.stiffness, options.aggregate) == ("score", 1.5, 1)
+    assert (options.curvature_gain, options.normal_smoothing) == (2.0, 4)
+    assert stereo_options(TrackerConfig()).normal_smoothing == TrackerConfig().stereo_normal_smoothing
 
 
 def test_stereo_and_filter_settings_do_not_key_the_fits():
