@@ -136,6 +136,8 @@ class PhotoOptions:
 
     def __post_init__(self) -> None:
         check_weighting(self.weighting, "weighting")
+        if self.normal_smoothing < 0:
+            raise ValueError(f"normal_smoothing must be 0 or more steps, got {self.normal_smoothing}")
 
 
 def check_weighting(weighting: str, option: str) -> None:

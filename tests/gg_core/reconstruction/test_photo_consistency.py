@@ -226,6 +226,8 @@ def test_sweep_normals_are_the_vertex_normals_smoothed_over_the_set_steps():
     tilt = {name: np.degrees(np.arccos(np.clip(n[inner, 2], -1, 1))).mean() for name, n in
             (("raw", raw), ("smoothed", smoothed))}
     assert tilt["raw"] > 5.0 and tilt["smoothed"] < 0.3 * tilt["raw"]
+    with pytest.raises(ValueError, match="normal_smoothing"):
+        PhotoOptions(normal_smoothing=-1)
 
 
 def test_smoothed_normals_carry_a_wrinkled_mesh_onto_the_plane_without_sliding_it_sideways():
