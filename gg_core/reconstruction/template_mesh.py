@@ -10,6 +10,16 @@
 6. The hull's bevel cut off the borders that hang free of the body (a hem; border_bevel.py).
 7. The border tidied (short border edges collapsed, border relaxed), then a last isotropic remesh of the open
    garment (which keeps border vertices) for even triangles.
+
+Why no pycolmap step (measured 2026-11-27, session 17): pycolmap here has no CUDA, so COLMAP's dense stereo
+(patch_match_stereo) is out, and Poisson meshing needs its dense oriented points. What pycolmap offers on CPU is
+sparse: SIFT features, exhaustive matching, and triangulation with the known cameras. It was tried on the demo
+capture's template frame (00_walk frame 0; 12 cameras 30 degrees apart, 192 x 256 px). Inside the garment masks:
+28-57 keypoints per image, 14 raw matches over 2 of the 66 pairs, and no point triangulated (even at a peak
+threshold of 0.001 and at least 3 matches per pair). On the whole images: 134-177 keypoints, 122 verified matches
+over 13 pairs, 14 points triangulated, all 40-60 cm off the garment. At this pixel size the printed cloth gives SIFT
+nothing to match across 30 degrees. Step 5's dense plane sweep of patch correlations (photo_consistency.py) takes
+the multi-view stereo role on CPU.
 """
 from __future__ import annotations
 
