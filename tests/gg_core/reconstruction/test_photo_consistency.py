@@ -9,6 +9,8 @@ from gg_core.reconstruction.mesh_graph import adjacency, vertex_normals
 
 from .scenes import cylinder_image, pixel_rays, plane_image, sphere_mesh
 
+FAR_TRIANGLE = (np.array([[9.0, 9, 9], [9.1, 9, 9], [9, 9.1, 9]]), np.array([[0, 1, 2]]))   # occludes nothing
+
 
 def _plane(n: int, size: float, z: float) -> tuple[np.ndarray, np.ndarray]:
     g = np.linspace(-size / 2, size / 2, n)
@@ -18,6 +20,12 @@ def _plane(n: int, size: float, z: float) -> tuple[np.ndarray, np.ndarray]:
     a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
     faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     return verts, faces
+
+
+def _camera_facing_plane() -> tuple[np.ndarray, np.ndarray]:
+    """The 15 x 15 plane z = 0 of _plane with its faces wound so that its normals face the cameras (+z)."""
+    verts, faces = _plane(15, 0.3, 0.0)
+    return verts, faces if vertex_normals(verts, faces)[0, 2] > 0 else faces[:, ::-1]
 
 
 def _cameras():
@@ -121,10 +129,8 @@ def _offset_plane() -> tuple[np.ndarray, np.ndarray, dict]:
     hull) and refined with 4 cm of search."""
     cams = _cameras()
     images = [plane_image(c) for c in cams]
-    verts, faces = _plane(15, 0.3, 0.0)
-    if vertex_normals(verts, faces)[0, 2] < 0:
-        faces = faces[:, ::-1]
-    far = RayCaster([(np.array([[9.0, 9, 9], [9.1, 9, 9], [9, 9.1, 9]]), np.array([[0, 1, 2]]))])  # occludes nothing
+    verts, faces = _camera_facing_plane()
+    far = RayCaster([FAR_TRIANGLE])
     moved, log = refine_along_normals(verts + [0.0, 0.0, 0.02], faces, cams, images, far, 0.005,
                                       PhotoOptions(search_in=0.04))
     return verts, moved, log
@@ -156,11 +162,9 @@ def test_curvature_gain_scales_the_patches_bend():
     # the mesh's own quadric, which moves the bump's vertices differently
     cams = _cameras()
     images = [plane_image(c) for c in cams]
-    verts, faces = _plane(15, 0.3, 0.0)
-    if vertex_normals(verts, faces)[0, 2] < 0:
-        faces = faces[:, ::-1]
+    verts, faces = _camera_facing_plane()
     verts[:, 2] = 0.02 * np.exp(-(verts[:, 0] ** 2 + verts[:, 1] ** 2) / (2 * 0.04 ** 2))
-    far = RayCaster([(np.array([[9.0, 9, 9], [9.1, 9, 9], [9, 9.1, 9]]), np.array([[0, 1, 2]]))])
+    far = RayCaster([FAR_TRIANGLE])
     moved = {}
     for name, options in (("flat", PhotoOptions(search_in=0.03, rounds=1, curved=False)),
                           ("gain 0", PhotoOptions(search_in=0.03, rounds=1, curvature_gain=0.0)),
@@ -209,9 +213,7 @@ def test_snr_weighting_lets_a_clear_match_outweigh_a_mediocre_one():
 def _wrinkled_plane(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """A 15 x 15 plane mesh with 4 mm of vertex noise in height: wrinkles smaller than a patch, which tilt each
     vertex's own normal by about 7 degrees."""
-    verts, faces = _plane(15, 0.3, 0.0)
-    if vertex_normals(verts, faces)[0, 2] < 0:
-        faces = faces[:, ::-1]
+    verts, faces = _camera_facing_plane()
     verts[:, 2] += np.random.default_rng(seed).normal(0.0, 0.004, len(verts))
     return verts, faces
 
@@ -237,7 +239,7 @@ def test_smoothed_normals_carry_a_wrinkled_mesh_onto_the_plane_without_sliding_i
     images = [plane_image(c) for c in cams]
     verts, faces = _wrinkled_plane()
     start = verts + [0.0, 0.0, 0.02]
-    far = RayCaster([(np.array([[9.0, 9, 9], [9.1, 9, 9], [9, 9.1, 9]]), np.array([[0, 1, 2]]))])  # occludes nothing
+    far = RayCaster([FAR_TRIANGLE])
     result = {}
     for steps in (0, 10):
         moved, _ = refine_along_normals(start, faces, cams, images, far, 0.005,

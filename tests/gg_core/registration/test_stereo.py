@@ -9,9 +9,7 @@ from gg_core.registration.stereo import fisher_average, stereo_sequence, tempora
 from gg_core.registration.views import View
 
 from ..reconstruction.scenes import plane_image
-from ..reconstruction.test_photo_consistency import _cameras, _plane
-
-FAR_BODY = (np.array([[9.0, 9, 9], [9.1, 9, 9], [9, 9.1, 9]]), np.array([[0, 1, 2]]))   # occludes nothing
+from ..reconstruction.test_photo_consistency import FAR_TRIANGLE as FAR_BODY, _cameras, _plane
 
 
 def _views(noise_seed: int | None = None) -> list[View]:
