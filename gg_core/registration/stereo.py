@@ -179,15 +179,21 @@ def temporal_weights(frames: int) -> np.ndarray:
     return (half + 1 - np.abs(np.arange(-half, half + 1))).astype(np.float64)
 
 
-def fisher_average(curves: Sequence[tuple[np.ndarray, np.ndarray]], weights: np.ndarray) -> np.ndarray:
-    """[V, D] weighted average of frames' NCC curves ([V, D] curves, [V] share that had scores) taken in Fisher's z
-    = atanh(NCC) and mapped back (tanh): z of a correlation is near normal with a variance that does not depend
-    on the correlation, so its mean is the right way to pool them; a frame whose curve has a clear peak (0.95:
-    z 1.8) then outweighs neighbours with mediocre ones (0.6: z 0.7) where a plain mean flattens it."""
-    total = np.zeros_like(curves[0][0], dtype=np.float64)
+def fisher_z(curves: np.ndarray) -> np.ndarray:
+    """Fisher's z = atanh(NCC) of score curves, clipped below 1 (FISHER_CLIP). Taken once per frame and round:
+    each frame's curves are pooled into up to `frames` neighbours' averages."""
+    return np.arctanh(np.clip(curves, -FISHER_CLIP, FISHER_CLIP))
+
+
+def fisher_average(zs: Sequence[tuple[np.ndarray, np.ndarray]], weights: np.ndarray) -> np.ndarray:
+    """[V, D] weighted average of frames' NCC curves, given as their Fisher's z ([V, D] fisher_z of the curves,
+    [V] share that had scores), mapped back to NCC (tanh): z of a correlation is near normal with a variance that
+    does not depend on the correlation, so its mean is the right way to pool them; a frame whose curve has a clear
+    peak (0.95: z 1.8) then outweighs neighbours with mediocre ones (0.6: z 0.7) where a plain mean flattens it."""
+    total = np.zeros_like(zs[0][0], dtype=np.float64)
     mass = np.zeros(len(total))
-    for (c, w), weight in zip(curves, weights):
-        total += weight * w[:, None] * np.arctanh(np.clip(c, -FISHER_CLIP, FISHER_CLIP))
+    for (z, w), weight in zip(zs, weights):
+        total += weight * w[:, None] * z
         mass += weight * w
     return np.tanh(total / np.maximum(mass, 1e-12)[:, None])
 
@@ -206,7 +212,7 @@ def stereo_sequence(fits: Sequence[np.ndarray], faces: np.ndarray, load: Callabl
     meshes = [np.asarray(f, np.float64).copy() for f in fits]
     normals: list[np.ndarray | None] = [None] * count
     held: dict[int, _Frame] = {}
-    curves: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+    curves: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}     # (frame, round) -> (fisher_z, share)
     logs: list[dict] = [{"rounds": [], "seconds": 0.0, "cpu_seconds": 0.0} for _ in range(count)]
     depths: list[np.ndarray] = []
     spacing = 0.0
@@ -219,8 +225,9 @@ def stereo_sequence(fits: Sequence[np.ndarray], faces: np.ndarray, load: Callabl
 
     def score(t: int, r: int) -> None:
         frame = held[t]
-        curves[t, r] = sweep.curves(meshes[t], normals[t], depths[r], frame.seen, frame.cameras, frame.images,
-                                    spacing, frame.masks)
+        scores, share = sweep.curves(meshes[t], normals[t], depths[r], frame.seen, frame.cameras, frame.images,
+                                     spacing, frame.masks)
+        curves[t, r] = fisher_z(scores), share
 
     def enter(t: int) -> None:
         nonlocal spacing, depths, rounds

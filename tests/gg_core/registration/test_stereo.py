@@ -5,7 +5,8 @@ import torch
 from gg_core.geometry.raycast import RayCaster
 from gg_core.reconstruction.photo_consistency import PhotoOptions, refine_along_normals
 from gg_core.reconstruction.template_mesh import pixel_footprint
-from gg_core.registration.stereo import fisher_average, stereo_sequence, temporal_weights
+from gg_core.registration.stereo import (FISHER_CLIP, fisher_average, fisher_z, stereo_sequence,
+                                         temporal_weights)
 from gg_core.registration.views import View
 
 from ..reconstruction.scenes import plane_image
@@ -48,13 +49,14 @@ def test_fisher_average_lets_a_clear_peak_outweigh_two_mediocre_ones():
     clear = np.array([[0.95, 0.3, 0.1]])
     mediocre = np.array([[0.1, 0.3, 0.6]])
     scored, unscored = np.ones(1), np.zeros(1)
-    frames = [(clear, scored), (mediocre, scored), (mediocre, scored)]
-    plain = np.mean([c for c, _ in frames], axis=0)
+    frames = [(fisher_z(clear), scored), (fisher_z(mediocre), scored), (fisher_z(mediocre), scored)]
+    plain = np.mean([clear, mediocre, mediocre], axis=0)
     averaged = fisher_average(frames, np.ones(3))
     assert np.argmax(plain) == 2 and np.argmax(averaged) == 0
     z = (np.arctanh([0.95, 0.3, 0.1]) + 2 * np.arctanh([0.1, 0.3, 0.6])) / 3
+    np.testing.assert_allclose(fisher_z(np.array([1.0, -1.0])), np.arctanh([FISHER_CLIP, -FISHER_CLIP]))
     np.testing.assert_allclose(averaged[0], np.tanh(z))
-    np.testing.assert_allclose(fisher_average([(clear, unscored)], np.ones(1)), 0.0)
+    np.testing.assert_allclose(fisher_average([(fisher_z(clear), unscored)], np.ones(1)), 0.0)
     # the frames' weights count: the clear frame alone at weight 1, the mediocre ones at 0
     np.testing.assert_allclose(fisher_average(frames, np.array([1.0, 0, 0])), clear)
 
