@@ -63,15 +63,20 @@ def test_bench_scoring():
     assert friction == {"body_friction.mu": pytest.approx(0.6)}
     assert parameter_error(friction, {"body_friction.mu": 0.3}) == pytest.approx(0.5)
     cases = [{"true_class": "none", "predicted": "none", "correct": True, "heldout_gain": 0.0, "gap_closed": None,
-              "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": None},
+              "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": None,
+              "resolved_by_reference": False},
              {"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
-              "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01, "true_effect_l2": 0.006},
+              "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01, "true_effect_l2": 0.006,
+              "resolved_by_reference": True},
              {"true_class": "wind", "predicted": "gravity", "correct": False, "heldout_gain": 0.1,
-              "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": 0.0095}]
+              "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": 0.0095,
+              "resolved_by_reference": False}]
     summary = summarize(cases, min_gain=0.1)
     assert summary["accuracy_effect_present"] == 0.5 and summary["false_alarm_rate_none"] == 0.0
     # the wind case's true effect gains only 5 %: not detectable at a 10 % acceptance gain
     assert summary["detectable_cases"] == 1 and summary["accuracy_detectable"] == 1.0
+    # nor does the reference resolve it: at twice Blender's steps it changes by more than itself
+    assert summary["cases_resolved_by_reference"] == 1 and summary["accuracy_resolved_by_reference"] == 1.0
     assert summary["median_parameter_error"] == pytest.approx(0.1) and summary["median_gap_closed"] == 0.6
     table = confusion(cases).splitlines()
     assert table[0].split()[-3:] == ["gravity", "none", "wind"]

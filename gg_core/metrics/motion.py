@@ -1,0 +1,64 @@
+"""How differently recordings of one garment move, without any simulator of ours in the loop.
+
+The diagnosis benchmark asks two things of a hidden effect with it: how much it changes the recorded motion (its
+capture against the same seed's capture with nothing hidden), and whether that change is physics or the
+reference solver's numerics (the same change when Blender takes twice the steps per frame). An effect whose
+change moves by as much as the change itself when the step is halved is not defined by the reference: no
+simulator that is not Blender at the same step size can be expected to reproduce it.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..capture.layout import Capture
+from ..geometry.meshio import read_mesh
+
+
+def displacements(frames: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """[T,F,3] displacements of the `free` vertices of `frames` [T,V,3] from the first frame.
+
+    Displacements, not positions: the diagnosis starts every rollout from a recorded state, so a garment that
+    hangs differently from the first frame on is given to it; what it must explain is how the motion goes on."""
+    return frames[:, free] - frames[:1, free]
+
+
+def rms(fields: list[np.ndarray]) -> float:
+    """Root mean square vector length over every frame and vertex of the [T,F,3] `fields` (one per sequence,
+    each weighted by its size)."""
+    squares = np.concatenate([(f * f).sum(-1).ravel() for f in fields])
+    return float(np.sqrt(squares.mean()))
+
+
+def ground_truth_frames(capture: Path) -> dict[str, np.ndarray]:
+    """Sequence name -> ground-truth garment frames [T,V,3] of a synthetic capture."""
+    out = {}
+    for name, seq in Capture(capture).sequences.items():
+        files = seq.gt_garment_files
+        out[name] = np.stack([read_mesh(files[f])[0] for f in sorted(files)])
+    return out
+
+
+def effect_field(effect: Path, reference: Path) -> list[np.ndarray]:
+    """Per sequence, [T,F,3] how the displacements of the synthetic capture `effect` differ from those of
+    `reference` (same garment and motions), on the vertices neither pins (truth.json)."""
+    frames_e, frames_r = ground_truth_frames(effect), ground_truth_frames(reference)
+    if sorted(frames_e) != sorted(frames_r):
+        raise ValueError(f"captures hold different sequences: {sorted(frames_e)} vs {sorted(frames_r)}")
+    pinned = {i for c in (effect, reference) for i in Capture(c).truth["garment"]["pinned_vertices"]}
+    out = []
+    for name in sorted(frames_e):
+        e, r = frames_e[name], frames_r[name]
+        if e.shape != r.shape:
+            raise ValueError(f"sequence '{name}' differs in shape: {e.shape} vs {r.shape}")
+        free = np.array([i not in pinned for i in range(e.shape[1])])
+        out.append(displacements(e, free) - displacements(r, free))
+    return out
+
+
+def effect_sizes(effect: Path, reference: Path, effect_finer: Path, reference_finer: Path) -> tuple[float, float]:
+    """(signal, step change) in metres: the RMS of effect_field(effect, reference), and the RMS of how that field
+    changes when both captures are simulated at a finer step (`effect_finer`, `reference_finer`)."""
+    coarse, fine = effect_field(effect, reference), effect_field(effect_finer, reference_finer)
+    return rms(coarse), rms([c - f for c, f in zip(coarse, fine)])
