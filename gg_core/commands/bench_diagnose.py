@@ -26,6 +26,7 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -69,7 +70,7 @@ def preset(frames: int, vertices: int):
                   collision_quality=2, self_collision=False, motions=("walk", "torso_twist", "arm_swing"))
 
 
-def capture_of(args: argparse.Namespace, name: str, seed: int, effect: str = "none", params: tuple[str, ...] = (),
+def capture_of(args: argparse.Namespace, name: str, seed: int, effect: str = "none", params: Sequence[str] = (),
                quality_factor: int = 1) -> Path:
     """The cached ground-truth capture `name` (generated on first use; `quality_factor` multiplies the cloth
     solver's steps per frame)."""
@@ -84,7 +85,7 @@ def capture_of(args: argparse.Namespace, name: str, seed: int, effect: str = "no
     return capture
 
 
-def effect_sizes_of(args: argparse.Namespace, name: str, seed: int, effect: str, params: list[str]
+def effect_sizes_of(args: argparse.Namespace, name: str, seed: int, effect: str, params: Sequence[str]
                     ) -> tuple[float, float]:
     """(signal, step change) in metres of the case capture `name` (metrics.motion.effect_sizes), against the same
     seed's capture with nothing hidden, the finer step from captures simulated with twice the steps per frame."""
