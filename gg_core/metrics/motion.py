@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..capture.layout import Capture
-from ..geometry.meshio import read_mesh
+from ..synth.quality import gt_frames
 
 
 def displacements(frames: np.ndarray, free: np.ndarray) -> np.ndarray:
@@ -31,25 +31,16 @@ def rms(fields: list[np.ndarray]) -> float:
     return float(np.sqrt(squares.mean()))
 
 
-def ground_truth_frames(capture: Path) -> dict[str, np.ndarray]:
-    """Sequence name -> ground-truth garment frames [T,V,3] of a synthetic capture."""
-    out = {}
-    for name, seq in Capture(capture).sequences.items():
-        files = seq.gt_garment_files
-        out[name] = np.stack([read_mesh(files[f])[0] for f in sorted(files)])
-    return out
-
-
 def effect_field(effect: Path, reference: Path) -> list[np.ndarray]:
     """Per sequence, [T,F,3] how the displacements of the synthetic capture `effect` differ from those of
     `reference` (same garment and motions), on the vertices neither pins (truth.json)."""
-    frames_e, frames_r = ground_truth_frames(effect), ground_truth_frames(reference)
-    if sorted(frames_e) != sorted(frames_r):
-        raise ValueError(f"captures hold different sequences: {sorted(frames_e)} vs {sorted(frames_r)}")
-    pinned = {i for c in (effect, reference) for i in Capture(c).truth["garment"]["pinned_vertices"]}
+    cap_e, cap_r = Capture(effect), Capture(reference)
+    if sorted(cap_e.sequences) != sorted(cap_r.sequences):
+        raise ValueError(f"captures hold different sequences: {sorted(cap_e.sequences)} vs {sorted(cap_r.sequences)}")
+    pinned = {i for c in (cap_e, cap_r) for i in c.truth["garment"]["pinned_vertices"]}
     out = []
-    for name in sorted(frames_e):
-        e, r = frames_e[name], frames_r[name]
+    for name in sorted(cap_e.sequences):
+        e, r = gt_frames(cap_e.sequence(name)), gt_frames(cap_r.sequence(name))
         if e.shape != r.shape:
             raise ValueError(f"sequence '{name}' differs in shape: {e.shape} vs {r.shape}")
         free = np.array([i not in pinned for i in range(e.shape[1])])
