@@ -70,6 +70,11 @@ def preset(frames: int, vertices: int):
                   collision_quality=2, self_collision=False, motions=("walk", "torso_twist", "arm_swing"))
 
 
+def case_name(garment: str, effect: str, strength: float, seed: int) -> str:
+    """The cached capture of one benchmark case; the effects' reference capture is ("none", 0)."""
+    return f"{garment}_{effect}_s{strength:g}_seed{seed}"
+
+
 def capture_of(args: argparse.Namespace, name: str, seed: int, effect: str = "none", params: Sequence[str] = (),
                quality_factor: int = 1) -> Path:
     """The cached ground-truth capture `name` (generated on first use; `quality_factor` multiplies the cloth
@@ -91,7 +96,7 @@ def effect_sizes_of(args: argparse.Namespace, name: str, seed: int, effect: str,
     seed's capture with nothing hidden, the finer step from captures simulated with twice the steps per frame."""
     from ..metrics.motion import effect_sizes
 
-    none = f"{args.garment}_none_s0_seed{seed}"
+    none = case_name(args.garment, "none", 0.0, seed)
     return effect_sizes(capture_of(args, name, seed, effect, params), capture_of(args, none, seed),
                         capture_of(args, f"{name}_steps_x2", seed, effect, params, quality_factor=2),
                         capture_of(args, f"{none}_steps_x2", seed, quality_factor=2))
@@ -167,7 +172,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     from ..diagnosis.library import BY_NAME, SYNTH_EFFECT_CLASS
     from ..stages.diagnose import DiagnoseRequest, run_diagnose
 
-    name = f"{args.garment}_{effect}_s{strength:g}_seed{seed}"
+    name = case_name(args.garment, effect, strength, seed)
     hidden = effect if strength > 0 else "none"
     params = effect_params(effect, strength) if strength > 0 else []
     capture = capture_of(args, name, seed, hidden, params)
