@@ -115,7 +115,7 @@ def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
     stiffnesses, ours the StVK Lame parameters: comparable only approximately. friction: Blender's collision
     response (collision.cc) takes min(0.01 friction v_n, |v_t|) off the tangential velocity where it stops the
     normal approach v_n, i.e. Coulomb mu = 0.01 friction against the collision impulse; ours acts against the
-    lagged penalty force, so this too is approximate (the estimate is the total: the baseline's 0.5 included).
+    penalty's normal force, so this too is approximate (the estimate is the total: the baseline's 0.5 included).
     Wind strength has no counterpart in our units and is not scored."""
     effect, params = truth["effect"]["name"], truth["effect"]["params"]
     if effect == "air_drag":

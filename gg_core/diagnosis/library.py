@@ -46,6 +46,10 @@ GRAVITY = 9.81              # m/s^2
 MIN_TERMINAL_SPEED = 0.3    # m/s: slower free fall in air is not cloth (module docstring)
 AIR_DENSITY = 1.2           # kg/m^3
 MAX_DRAG_COEFFICIENT = 2.3  # C_d of the draggiest shape (a hemispherical cup, open side to the flow)
+# friction added to the baseline's, tried on the training rollouts (confirm.trial): a quarter of the default model's
+# 0.5 to four times it, doubling; textiles on dry skin have 0.2-0.6, on moist skin above 1 (Derler and Gerhardt,
+# Tribology Letters 2012)
+FRICTION_ADDED = (0.125, 0.25, 0.5, 1.0, 2.0)
 # the synthetic generator's hidden effects (gg_core/synth/effects.py) and the class that names each correctly
 SYNTH_EFFECT_CLASS = {"none": "none", "wind": "wind", "air_drag": "linear_damping", "friction": "friction",
                       "shrink": "rest_length", "stiff_patch": "region_stiffness", "gravity": "gravity"}
@@ -63,10 +67,13 @@ class Context:
     region: np.ndarray | None = None
 
     @classmethod
-    def build(cls, sim: ImplicitSimulator, batch: FrameBatch, region: np.ndarray | None = None) -> "Context":
+    def build(cls, sim: ImplicitSimulator, batch: FrameBatch, region: np.ndarray | None = None,
+              predicted: np.ndarray | None = None) -> "Context":
+        """`predicted`: the simulator's one-frame predictions of the batch, where friction's normal forces are
+        taken (FrameBatch.stacked)."""
         with torch.no_grad():
             rest = sim.cloth.rest()
-        return cls(sim, batch, batch.stacked(sim), rest, region)
+        return cls(sim, batch, batch.stacked(sim, predicted), rest, region)
 
     def term(self, name: str) -> Term | None:
         return next((t for t in self.sim.terms if t.name == name), None)
@@ -142,6 +149,7 @@ class Candidate:
     needs_region: bool = False
     region_from: str = "map"    # "map": the localization's region (localize.py); "scan": its own (scan.py)
     plausibility: Callable[[dict[str, object], Cloth], str | None] | None = None
+    rollout_values: tuple[float, ...] = ()   # coefficients also tried on training rollouts (confirm.trial)
 
     def implausible(self, values: dict[str, object], cloth: Cloth) -> str | None:
         """Why the refitted `values` (Trial.values) are not physical for `cloth` (its rest shape), or None."""
@@ -279,7 +287,8 @@ CANDIDATES: tuple[Candidate, ...] = (
     Candidate("body_friction", "friction",
               "extra Coulomb friction -mu N t against the body: shoulders, waist and hips while sliding",
               ("mu",), "1", (0.0, np.inf),
-              _term_columns("body_friction", [{"mu": 1.0}]), _added_term("body_friction", "mu")),
+              _term_columns("body_friction", [{"mu": 1.0}]), _added_term("body_friction", "mu"),
+              rollout_values=FRICTION_ADDED),
     Candidate("anisotropic_stretch", "anisotropy",
               "extra stiffness along the warp (template vertical) and weft yarns: tension regions, bias cuts",
               ("k_warp", "k_weft"), "Pa", (0.0, np.inf),

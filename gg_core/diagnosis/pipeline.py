@@ -231,7 +231,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     timings["residual_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    ctx = Context.build(sim, batch, loc.region)
+    ctx = Context.build(sim, batch, loc.region, predicted)
     scans = {c.name: scan_region(c, ctx, pooling, predicted, y, n_cols, req.probe_acceleration, req.min_explained)
              for c in CANDIDATES if c.region_from == "scan"}
     contexts = {c.name: replace(ctx, region=scans[c.name].region) if c.name in scans else ctx for c in CANDIDATES}
@@ -391,7 +391,7 @@ def _trial_from_starts(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulato
     if not np.all(sizes > 0):
         return start
     probed = trial(sim, BASELINE_FIT, [(cand, sizes)], ctx, ctx.region, train, heldout, attached, config)
-    probed.start = "probe"
+    probed.start = "probe" if probed.start == "regression" else f"probe, then {probed.start}"
     return probed if probed.train_l2 < start.train_l2 else start
 
 
@@ -419,7 +419,7 @@ def _reference_trial(cand: Candidate, sim: ImplicitSimulator, batch: FrameBatch,
     """A trial of `cand` whatever the selection said, on the given region (benchmarks: the true effect, on the
     true region), started from its regression coefficients on that region (its probe sizes where those are 0 or
     the probe's step failed)."""
-    ctx = Context.build(sim, batch, region if cand.needs_region else None)
+    ctx = Context.build(sim, batch, region if cand.needs_region else None, predicted)
     probes = cand.probes(ctx, req.probe_acceleration)
     rows = pooling.rows(responses(sim, batch, predicted, probes)).T
     coefs = np.array([size for size, _ in probes])

@@ -19,7 +19,7 @@ per-frame noise is averaged instead of amplified).
 from __future__ import annotations
 
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, ContextManager, Iterator
 
 import numpy as np
@@ -43,9 +43,14 @@ class FrameBatch:
     names: list[str]
     dt: float
 
-    def stacked(self, sim: ImplicitSimulator) -> StepInputs:
-        """Torch batch with the lagged friction forces of the simulator's current collision parameters."""
-        return StepInputs.stack([sim.with_contact_force(s) for s in self.steps])
+    def stacked(self, sim: ImplicitSimulator, ends: np.ndarray | None = None) -> StepInputs:
+        """Torch batch with friction's normal forces for the simulator's current collision parameters: at `ends`
+        [N,V,3], the simulator's own one-frame predictions, as its steps take them (ImplicitSimulator.solve), or
+        lagged from the observed start states."""
+        if ends is None:
+            return StepInputs.stack([sim.with_contact_force(s) for s in self.steps])
+        return StepInputs.stack([replace(s, contact_force=sim.end_contact_force(x, s))
+                                 for s, x in zip(self.steps, ends)])
 
     @property
     def velocity(self) -> np.ndarray:

@@ -133,7 +133,7 @@ class Collision(Term):
         return float((k * g ** 3).sum())
 
     def normal_force(self, signed_distance: np.ndarray, vertex_area: np.ndarray) -> np.ndarray:
-        """Penalty force magnitude (N) at the given distances: the lagged normal force friction uses."""
+        """Penalty force magnitude (N) at the given distances: the normal force friction uses."""
         g = np.maximum(self.p("margin") - signed_distance, 0.0)
         return 3 * self.p("stiffness") * vertex_area * g * g
 

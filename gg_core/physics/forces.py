@@ -26,7 +26,8 @@ def _vel(x, step: StepInputs):
 
 class BodyFriction(Term):
     """Coulomb friction against the body: opposes the garment's slip relative to the body surface at each contact,
-    with coefficient `mu` and the lagged normal force of the collision penalty; smoothed below `slip` (m/s)
+    with coefficient `mu` and the collision penalty's normal force at the step's own contact solution, lagged once
+    (ImplicitSimulator.end_contact_force); smoothed below `slip` (m/s)
     so that sticking is a stiff spring instead of a discontinuity (IPC-style lagged friction potential)."""
 
     name = "body_friction"

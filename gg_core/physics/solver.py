@@ -36,6 +36,12 @@ class SolveStats:
     energy: float = 0.0
     last_step: float = 0.0
 
+    def add(self, more: "SolveStats") -> None:
+        """Count a further solve of the same step."""
+        self.newton_iterations += more.newton_iterations
+        self.cg_iterations += more.cg_iterations
+        self.energy, self.last_step = more.energy, more.last_step
+
 
 def total_energy(terms: list[Term], x: np.ndarray, step: StepInputs, num: Numeric) -> float:
     return sum(t.assemble(x, step, num, None) for t in terms)

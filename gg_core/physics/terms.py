@@ -25,7 +25,8 @@ from .cloth import Numeric, Rest
 class StepInputs:
     """Everything one step reads besides the unknown end positions x. Arrays are numpy [V,...] for the solver or
     torch [..., V, ...] (leading batch dims = frames) for fitting. Contact planes are those of the body at the
-    end of the step; `contact_force` is the lagged normal force magnitude that friction uses."""
+    end of the step; `contact_force` is the normal force magnitude that friction uses, held fixed within a solve:
+    prepared from the start state, then ImplicitSimulator.solve replaces it by the force at its own end state."""
 
     dt: float
     x_prev: Any            # [V,3] positions at the start of the step
@@ -36,7 +37,7 @@ class StepInputs:
     contact_normal: Any    # [V,3] outward body normal there
     contact_motion: Any    # [V,3] displacement of that body point over the step
     contact_distance: Any  # [V] signed distance to the body at the start of the step (0 without contact)
-    contact_force: Any     # [V] lagged normal force (N): the collision penalty's force at contact_distance
+    contact_force: Any     # [V] friction's normal force (N), held fixed in the step's potential
     normal_prev: Any       # [V,3] unit cloth vertex normals at the start of the step
 
     _ARRAYS: ClassVar[tuple[str, ...]] = ("x_prev", "v_prev", "pin_target", "contact_active", "contact_point",
