@@ -80,7 +80,7 @@ def build_frames(sim: ImplicitSimulator, sequences: list[Observed]) -> FrameBatc
 
 def predict(sim: ImplicitSimulator, batch: FrameBatch) -> np.ndarray:
     """[N,V,3] the simulator's one-frame predictions from the observed states (pins follow the observation)."""
-    return np.stack([sim.step(ClothState(s.x_prev, s.v_prev), b0, b1, pin_next=x, observed=True).x
+    return np.stack([sim.step(ClothState(s.x_prev, s.v_prev), b0, b1, pin_next=x).x
                      for s, (b0, b1), x in zip(batch.steps, batch.bodies, batch.x_next)])
 
 

@@ -180,7 +180,7 @@ class TeacherForced:
         x, v = s.x, s.v
         for k in range(sim.substeps * self.horizon):
             step = sim.with_contact_force(s.first) if k == 0 else self._prepare(s, k, x, v)
-            y, step = sim.solve(step, self._blend(s, k)[0], observed=k == 0)
+            y, step = sim.solve(step, self._blend(s, k)[0])
             out.append((y, step))
             v = (y - x) / sim.dt
             x = y
@@ -316,8 +316,7 @@ def free_rollout(sim: ImplicitSimulator, obs: Observed) -> np.ndarray:
     first, see gg_core/diagnosis/noise.py); pinned vertices follow their observations."""
     g = obs.garment
     state = ClothState(g[1].copy(), (g[1] - g[0]) * obs.fps)
-    return sim.rollout(state, None if obs.body is None else obs.body[1:], n_frames=len(g) - 1, pin_frames=g[1:],
-                       observed=True)
+    return sim.rollout(state, None if obs.body is None else obs.body[1:], n_frames=len(g) - 1, pin_frames=g[1:])
 
 
 def rollout_distance(traj: np.ndarray, obs: Observed, pinned: np.ndarray) -> float:

@@ -30,11 +30,11 @@ class Simulator(Protocol):
     fps: float
 
     def step(self, state: ClothState, body_now: np.ndarray | None, body_next: np.ndarray | None,
-             pin_next: np.ndarray | None = None, observed: bool = False) -> ClothState: ...
+             pin_next: np.ndarray | None = None) -> ClothState: ...
 
     def rollout(self, state: ClothState, body_frames: np.ndarray | None, n_frames: int | None = None,
                 pin_frames: np.ndarray | None = None,
-                callback: Callable[[int, ClothState], None] | None = None, observed: bool = False) -> np.ndarray: ...
+                callback: Callable[[int, ClothState], None] | None = None) -> np.ndarray: ...
 
 
 @dataclass
@@ -98,8 +98,8 @@ class ImplicitSimulator:
         return self.with_contact_force(step)
 
     def with_contact_force(self, step: StepInputs) -> StepInputs:
-        """The step with friction's normal forces at its start state, for the current collision parameters (for an
-        observed start only the first solve's: solve())."""
+        """The step with friction's normal forces at its start state, for the current collision parameters (the
+        first solve's; solve() then takes them at its own end state)."""
         if self._collision is None:
             return step
         force = self._collision.normal_force(step.contact_distance, self.num.vertex_area) * step.contact_active
@@ -137,13 +137,10 @@ class ImplicitSimulator:
             x = x + push[:, None] * step.contact_normal
         return x
 
-    def solve(self, step: StepInputs, body_next: np.ndarray | None = None, observed: bool = False
-              ) -> tuple[np.ndarray, StepInputs]:
+    def solve(self, step: StepInputs, body_next: np.ndarray | None = None) -> tuple[np.ndarray, StepInputs]:
         """Minimize the step's potential. Vertices that end within half the margin of body_next without a
         contact (they were out of reach at the start, e.g. a flap swinging in), or inside it behind a stale
         contact plane, get the plane at their new closest body point and the step is solved again from there.
-        `observed`: the start state is an observation, not this simulator's own solution; friction's normal force
-        is then taken where the solve ends and the step solved again (end_contact_force).
         Returns the positions and the step inputs they minimize (fitting differentiates exactly that)."""
         x, stats = minimize(self.initial_guess(step), step, self.terms, self.num, self.options)
         if self.collider is not None and body_next is not None and self._collision is not None:
@@ -159,7 +156,7 @@ class ImplicitSimulator:
                                contact_motion=np.where(m, 0.0, step.contact_motion))
                 x, more = minimize(x, step, self.terms, self.num, self.options)
                 stats.add(more)
-        if observed and step.contact_active.any() and any(t.name == "body_friction" for t in self.terms):
+        if step.contact_active.any() and any(t.name == "body_friction" for t in self.terms):
             step = replace(step, contact_force=self.end_contact_force(x, step))
             x, more = minimize(x, step, self.terms, self.num, self.options)
             stats.add(more)
@@ -167,26 +164,24 @@ class ImplicitSimulator:
         return x, step
 
     def end_contact_force(self, x: np.ndarray, step: StepInputs) -> np.ndarray:
-        """Friction's normal force for a step that starts from an observed state: the collision penalty's force at
-        the step's solved end positions x (the step is then solved once more with it, one lagged update as IPC
-        lags friction's normal force).
+        """Friction's normal force: the collision penalty's force at the step's solved end positions x, and the
+        step is solved once more with it (one lagged update, as IPC lags friction's normal force).
 
-        Why: friction takes the penalty's force at the start state, which in a rollout is this simulator's own
-        previous solution, the force that acted. An observed cloth (from another simulator, with another
-        contact distance) may sit deeper in the margin than this model's equilibrium, and the stiff penalty
-        there is no force that acts: measured on the benchmark t-shirt (margin 15 mm), the start force was a
-        median 259 vertex weights at observed states against 8 in free rollouts, so every contact stuck in
-        teacher-forced steps whatever the friction coefficient, and fits could not see it. Solving every step
-        twice instead (not kept) halved `gg bench sim` (17.6 -> 7.6 fps; Newton iterations 3 -> 6 a step)."""
+        Why not the force at the start state: where a step starts from an observed state (fitting, residuals),
+        the observed cloth may sit deeper in the contact margin than this model's own equilibrium, and the
+        stiff penalty there is no force that acts: measured on the benchmark t-shirt (margin 15 mm), the start
+        force was a median 259 times the vertex weight at observed states against 8 in free rollouts, so every
+        contact stuck in teacher-forced steps whatever the friction coefficient, and fits could not see it.
+        The end state is this model's own contact solution, observed start or not."""
         if self._collision is None:
             return np.zeros(len(x))   # no penalty, no contact force
         end = ((x - step.contact_point) * step.contact_normal).sum(1)
         return self._collision.normal_force(end, self.num.vertex_area) * step.contact_active
 
     def step(self, state: ClothState, body_now: np.ndarray | None, body_next: np.ndarray | None,
-             pin_next: np.ndarray | None = None, observed: bool = False) -> ClothState:
+             pin_next: np.ndarray | None = None) -> ClothState:
         """One frame. Pinned vertices move linearly from their current position to `pin_next` [V,3] (default:
-        they stay). `observed`: the state is an observation (solve)."""
+        they stay)."""
         x, v = state.x, state.v
         pin_start = x
         for s in range(self.substeps):
@@ -195,24 +190,23 @@ class ImplicitSimulator:
             if body_now is not None:
                 b0, b1 = blend(body_now, body_next, t0), blend(body_now, body_next, t1)
             pin = None if pin_next is None else blend(pin_start, pin_next, t1)
-            x_new, _ = self.solve(self.prepare(x, v, b0, b1, self.dt, pin), b1, observed=observed and s == 0)
+            x_new, _ = self.solve(self.prepare(x, v, b0, b1, self.dt, pin), b1)
             v = (x_new - x) / self.dt
             x = x_new
         return ClothState(x, v)
 
     def rollout(self, state: ClothState, body_frames: np.ndarray | None, n_frames: int | None = None,
                 pin_frames: np.ndarray | None = None,
-                callback: Callable[[int, ClothState], None] | None = None, observed: bool = False) -> np.ndarray:
+                callback: Callable[[int, ClothState], None] | None = None) -> np.ndarray:
         """Positions [T,V,3] for the body frames [T,Vb,3] (frame 0 = the given state); without a body, n_frames.
-        `pin_frames` [T,V,3] gives the pinned vertices' positions per frame; `observed`: the given state is an
-        observation (solve)."""
+        `pin_frames` [T,V,3] gives the pinned vertices' positions per frame."""
         total = len(body_frames) if body_frames is not None else int(n_frames)
         out = np.empty((total, len(state.x), 3))
         out[0] = state.x
         for t in range(1, total):
             b0 = body_frames[t - 1] if body_frames is not None else None
             b1 = body_frames[t] if body_frames is not None else None
-            state = self.step(state, b0, b1, None if pin_frames is None else pin_frames[t], observed and t == 1)
+            state = self.step(state, b0, b1, None if pin_frames is None else pin_frames[t])
             out[t] = state.x
             if callback is not None:
                 callback(t, state)

@@ -22,16 +22,15 @@ def _sim(mu: float) -> ImplicitSimulator:
 
 
 def _sliding_body(frames: int = 14) -> np.ndarray:
-    """The sphere, with the sheet lying on its top, pulled sideways at 6 m/s^2: friction drags the sheet along,
-    sticking above mu of about 0.6."""
+    """The sphere, with the sheet lying on its top, pulled sideways ever faster: friction drags the sheet along."""
     bv = uv_sphere(0.25, 16, 32)[0]
     t = np.arange(frames) / 30.0
-    return bv[None] + (3.0 * t * t)[:, None, None] * np.array([1.0, 0.0, 0.0])
+    return bv[None] + (1.5 * t * t)[:, None, None] * np.array([1.0, 0.0, 0.0])
 
 
 def test_friction_is_chosen_on_training_rollouts():
     body = _sliding_body()
-    truth = _sim(1.0)
+    truth = _sim(1.5)
     rest = truth.cloth.template
     observed = Observed("pull", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), body), body, 30.0)
     pinned = np.zeros(len(rest), bool)
@@ -40,11 +39,11 @@ def test_friction_is_chosen_on_training_rollouts():
     error, label = rollout_choice(sim, BY_NAME["body_friction"], Context(sim, None, None, None), [observed], pinned,
                                   before)
     friction = next(t for t in sim.terms if t.name == "body_friction")
-    assert float(friction.params["mu"]) == 1.0                   # 0.5 + 0.5 of the grid: the truth
-    assert label == "rollout grid (mu + 0.5)"
+    assert float(friction.params["mu"]) == 1.5                   # 0.5 + 1.0 of the grid: the truth
+    assert label == "rollout grid (mu + 1)"
     assert error == rollout_error(sim, observed, pinned) < 0.2 * before
-    # a refit that already rolls out better than every grid value keeps its coefficient
+    # with the truth already there the grid finds nothing better and leaves the coefficient alone
     error, label = rollout_choice(truth, BY_NAME["body_friction"], Context(truth, None, None, None), [observed],
-                                  pinned, 0.0)
-    assert (error, label) == (0.0, "regression")
-    assert float(next(t for t in truth.terms if t.name == "body_friction").params["mu"]) == 1.0
+                                  pinned, rollout_error(truth, observed, pinned))
+    assert label == "regression"
+    assert float(next(t for t in truth.terms if t.name == "body_friction").params["mu"]) == 1.5
