@@ -16,6 +16,7 @@ from ..physics.fitting import (BehaviorParams, FitConfig, Observed, fit_behavior
                                rollout_error)
 from ..physics.forces import DEFAULT_TERMS, TERMS, make_terms
 from ..physics.simulator import ImplicitSimulator
+from ..physics.solver import SolverOptions
 from .confirm import Trial, trial
 from .features import FEATURES, state_features
 from .library import BY_NAME, CANDIDATES, Candidate, Context
@@ -192,7 +193,8 @@ def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, bo
         terms = make_terms(BASELINE_TERMS, {
             "collision": {"margin": scale * TERMS["collision"].defaults["margin"]},
             "viscoelastic_damping": {"tau": INITIAL_LOSS_FACTOR / (2.0 * np.pi)}})
-        sim = ImplicitSimulator(cloth, terms=terms, collider=collider, fps=req.fps, substeps=req.substeps)
+        sim = ImplicitSimulator(cloth, terms=terms, collider=collider, fps=req.fps, substeps=req.substeps,
+                                options=SolverOptions(friction_at_end=True))
         params, _ = fit_behavior(sim, train, fit_config(req, req.baseline_iterations))
         rollouts = [free_rollout(sim, obs) for obs in train]
         error = float(np.mean([rollout_distance(r, obs, attached) for r, obs in zip(rollouts, train)]))

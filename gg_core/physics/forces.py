@@ -26,9 +26,9 @@ def _vel(x, step: StepInputs):
 
 class BodyFriction(Term):
     """Coulomb friction against the body: opposes the garment's slip relative to the body surface at each contact,
-    with coefficient `mu` and the collision penalty's normal force at the step's own contact solution, lagged once
-    (ImplicitSimulator.end_contact_force); smoothed below `slip` (m/s)
-    so that sticking is a stiff spring instead of a discontinuity (IPC-style lagged friction potential)."""
+    with coefficient `mu` and the collision penalty's normal force, lagged: at the start state, or at the step's
+    own contact solution (SolverOptions.friction_at_end); smoothed below `slip` (m/s) so that sticking is a stiff
+    spring instead of a discontinuity (IPC-style lagged friction potential)."""
 
     name = "body_friction"
     defaults = {"mu": 0.5, "slip": 0.01}

@@ -98,8 +98,8 @@ class ImplicitSimulator:
         return self.with_contact_force(step)
 
     def with_contact_force(self, step: StepInputs) -> StepInputs:
-        """The step with friction's normal forces at its start state, for the current collision parameters (the
-        first solve's; solve() then takes them at its own end state)."""
+        """The step with friction's normal forces at its start state, for the current collision parameters (with
+        SolverOptions.friction_at_end only the first solve's)."""
         if self._collision is None:
             return step
         force = self._collision.normal_force(step.contact_distance, self.num.vertex_area) * step.contact_active
@@ -156,7 +156,8 @@ class ImplicitSimulator:
                                contact_motion=np.where(m, 0.0, step.contact_motion))
                 x, more = minimize(x, step, self.terms, self.num, self.options)
                 stats.add(more)
-        if step.contact_active.any() and any(t.name == "body_friction" for t in self.terms):
+        if self.options.friction_at_end and step.contact_active.any() and any(
+                t.name == "body_friction" for t in self.terms):
             step = replace(step, contact_force=self.end_contact_force(x, step))
             x, more = minimize(x, step, self.terms, self.num, self.options)
             stats.add(more)
@@ -164,15 +165,19 @@ class ImplicitSimulator:
         return x, step
 
     def end_contact_force(self, x: np.ndarray, step: StepInputs) -> np.ndarray:
-        """Friction's normal force: the collision penalty's force at the step's solved end positions x, and the
-        step is solved once more with it (one lagged update, as IPC lags friction's normal force).
+        """Friction's normal force with SolverOptions.friction_at_end: the collision penalty's force at the step's
+        solved end positions x, and the step is solved once more with it (one lagged update, as IPC lags
+        friction's normal force). By default friction takes the force at the start state.
 
-        Why not the force at the start state: where a step starts from an observed state (fitting, residuals),
-        the observed cloth may sit deeper in the contact margin than this model's own equilibrium, and the
-        stiff penalty there is no force that acts: measured on the benchmark t-shirt (margin 15 mm), the start
-        force was a median 259 times the vertex weight at observed states against 8 in free rollouts, so every
-        contact stuck in teacher-forced steps whatever the friction coefficient, and fits could not see it.
-        The end state is this model's own contact solution, observed start or not."""
+        Why: where a step starts from an observed state (fitting, residuals), the observed cloth may sit deeper
+        in the contact margin than this model's own equilibrium, and the stiff penalty there is no force that
+        acts: measured on the benchmark t-shirt (margin 15 mm), the start force was a median 259 vertex weights
+        at observed states against 8 in free rollouts, so every contact stuck in teacher-forced steps whatever
+        the friction coefficient, and fits could not see it. The end state is this model's own contact solution,
+        observed start or not. Not the default: the second solve halves `gg bench sim` (17.6 -> 7.6 fps, Newton
+        iterations 3 -> 6 a step). Taking it only for steps from observed states (rollouts keeping the start's)
+        cost nothing but lost the gravity tilt of the small Blender test capture (-8.6 % held-out, < 10 %;
+        -26.6 % with every step)."""
         if self._collision is None:
             return np.zeros(len(x))   # no penalty, no contact force
         end = ((x - step.contact_point) * step.contact_normal).sum(1)

@@ -27,6 +27,9 @@ class SolverOptions:
     cg_tol: float = 0.05       # relative residual of each inner linear solve
     cg_max: int = 25
     line_search: bool = True
+    # friction's normal force from the step's own solution, the step then solved once more with it
+    # (ImplicitSimulator.end_contact_force): the diagnosis, whose steps start from observed states, needs it
+    friction_at_end: bool = False
 
 
 @dataclass

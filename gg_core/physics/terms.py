@@ -26,7 +26,8 @@ class StepInputs:
     """Everything one step reads besides the unknown end positions x. Arrays are numpy [V,...] for the solver or
     torch [..., V, ...] (leading batch dims = frames) for fitting. Contact planes are those of the body at the
     end of the step; `contact_force` is the normal force magnitude that friction uses, held fixed within a solve:
-    prepared from the start state, then ImplicitSimulator.solve replaces it by the force at its own end state."""
+    prepared from the start state; with SolverOptions.friction_at_end, ImplicitSimulator.solve replaces it by the
+    force at its own end state."""
 
     dt: float
     x_prev: Any            # [V,3] positions at the start of the step

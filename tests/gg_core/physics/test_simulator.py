@@ -8,6 +8,7 @@ from gg_core.physics.cloth import GRAVITY, Cloth
 from gg_core.physics.contact import BodyCollider
 from gg_core.physics.forces import make_terms
 from gg_core.physics.simulator import ClothState, ImplicitSimulator
+from gg_core.physics.solver import SolverOptions
 
 from physics_helpers import sheet, uv_sphere
 
@@ -74,7 +75,8 @@ def test_garment_starting_inside_the_body_is_pushed_out():
 def test_friction_takes_the_normal_force_of_the_steps_own_contact_solution():
     """A step that starts deep in the contact margin (an observed state of a simulator whose cloth sits closer to
     the body) must not take friction's normal force from the stiff penalty there: that force never acts, the
-    solve pushes the cloth out within the step. The step returned by solve() carries the force at its end."""
+    solve pushes the cloth out within the step. With SolverOptions.friction_at_end (the diagnosis), the step
+    returned by solve() carries the force at its end."""
     v, f = sheet(24, 24, 0.3, 0.3, y=0.25 + 0.5e-3)            # resting on top of the sphere, 2.5 mm into the margin
     bv, bf = uv_sphere(0.25, 32, 64)
     sim = ImplicitSimulator(Cloth(v, f), collider=BodyCollider(bf, len(bv)))
@@ -83,5 +85,8 @@ def test_friction_takes_the_normal_force_of_the_steps_own_contact_solution():
     assert touching.sum() >= 5
     weight = sim.num.mass * np.linalg.norm(GRAVITY)
     assert (start.contact_force / weight).max() > 50                 # 95 weights at the top of the sphere
+    _, lagged = sim.solve(start, bv)                                  # the default: the start state's force
+    np.testing.assert_array_equal(lagged.contact_force, start.contact_force)
+    sim.options = SolverOptions(friction_at_end=True)
     _, solved = sim.solve(start, bv)
     assert (solved.contact_force / weight).max() < 10                # 4: the weight and the push out of the margin
