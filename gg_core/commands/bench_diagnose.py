@@ -18,6 +18,10 @@ steps (cosine 0.14-0.70 between the two changes); hidden air damping by 17 mm, a
 (cosine 0.78-0.88). An effect whose step change is as large as its signal is as much the reference's numerics
 as physics.
 
+With `--truth-simulator ours` the captures' garments are moved by our own simulator instead (the same garment,
+bodies and pins as the seed's Blender capture with nothing hidden; gg_core/diagnosis/resimulated.py): the
+well-specified check, where what the diagnosis's baseline lacks is the hidden effect alone and not Blender's cloth.
+
 Prints a confusion table on stderr and ONE JSON line on stdout.
 """
 from __future__ import annotations
@@ -58,6 +62,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--vertices", type=int, default=600, help="garment template vertex count")
     parser.add_argument("--garment", default="skirt", help="garment template of gg_core.synth.garments")
     parser.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates of each diagnosis")
+    parser.add_argument("--truth-simulator", choices=("blender", "ours"), default="blender",
+                        help="what moves the captures' garments: Blender's cloth, or our own simulator on the same "
+                             "bodies and pins (the well-specified check, gg_core/diagnosis/resimulated.py)")
     parser.add_argument("--fit-horizon", type=int, default=3,
                         help="frames each fitted observed state is predicted ahead (gg diagnose --fit-horizon)")
 
@@ -70,9 +77,11 @@ def preset(frames: int, vertices: int):
                   collision_quality=2, self_collision=False, motions=("walk", "torso_twist", "arm_swing"))
 
 
-def case_name(garment: str, effect: str, strength: float, seed: int) -> str:
-    """The cached capture of one benchmark case; the effects' reference capture is ("none", 0)."""
-    return f"{garment}_{effect}_s{strength:g}_seed{seed}"
+def case_name(args: argparse.Namespace, effect: str, strength: float, seed: int) -> str:
+    """The cached capture of one benchmark case; the effects' reference capture is ("none", 0). Captures of our
+    simulator (--truth-simulator ours) are named with an `ours_` prefix."""
+    prefix = "ours_" if args.truth_simulator == "ours" else ""
+    return f"{prefix}{args.garment}_{effect}_s{strength:g}_seed{seed}"
 
 
 def capture_of(args: argparse.Namespace, name: str, seed: int, effect: str = "none", params: Sequence[str] = (),
@@ -82,7 +91,16 @@ def capture_of(args: argparse.Namespace, name: str, seed: int, effect: str = "no
     from ..synth.generate import SynthRequest, generate
 
     capture = args.cache / name
-    if not (capture / "truth.json").is_file():
+    if args.truth_simulator == "ours" and not (capture / "truth.json").is_file():
+        from ..diagnosis.resimulated import resimulate
+        from ..stages.behavior import hand_mask
+        from ..stages.diagnose import DiagnoseRequest
+
+        blender = argparse.Namespace(**{**vars(args), "truth_simulator": "blender"})
+        reference = capture_of(blender, case_name(blender, "none", 0.0, seed), seed)
+        resimulate(reference, capture, effect, list(params), hand_mask,
+                   substeps=2 * DiagnoseRequest.substeps * quality_factor)
+    elif not (capture / "truth.json").is_file():
         base = preset(args.frames, args.vertices)
         generate(SynthRequest(preset=replace(base, cloth_quality=base.cloth_quality * quality_factor), out=capture,
                               seed=seed, garment=args.garment, effect=effect, effect_params=list(params),
@@ -96,7 +114,7 @@ def effect_sizes_of(args: argparse.Namespace, name: str, seed: int, effect: str,
     seed's capture with nothing hidden, the finer step from captures simulated with twice the steps per frame."""
     from ..metrics.motion import effect_sizes
 
-    none = case_name(args.garment, "none", 0.0, seed)
+    none = case_name(args, "none", 0.0, seed)
     return effect_sizes(capture_of(args, name, seed, effect, params), capture_of(args, none, seed),
                         capture_of(args, f"{name}_steps_x2", seed, effect, params, quality_factor=2),
                         capture_of(args, f"{none}_steps_x2", seed, quality_factor=2))
@@ -172,7 +190,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     from ..diagnosis.library import BY_NAME, SYNTH_EFFECT_CLASS
     from ..stages.diagnose import DiagnoseRequest, run_diagnose
 
-    name = case_name(args.garment, effect, strength, seed)
+    name = case_name(args, effect, strength, seed)
     hidden = effect if strength > 0 else "none"
     params = effect_params(effect, strength) if strength > 0 else []
     capture = capture_of(args, name, seed, hidden, params)
@@ -198,7 +216,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
                     None)
     ref = report["reference_trials"].get(reference[0]) if reference else None
     before, after = report["heldout_l2_before"], report["heldout_l2_after"]
-    true_params = truth_parameters(truth)
+    true_params = truth.get("true_parameters") or truth_parameters(truth)
     gap = None if ref is None else before - ref["heldout_l2"]
     return {
         "capture": name, "effect": effect, "strength": strength, "seed": seed, "noise_mm": noise,

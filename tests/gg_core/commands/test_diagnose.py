@@ -2,6 +2,7 @@
 (strength scaling, truth parameters in our units, parameter errors, confusion table, summary)."""
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -12,11 +13,11 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parents[1] / "diagnosis"))
 sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
 
-from diagnosis_helpers import write_sim_capture  # noqa: E402
+from diagnosis_helpers import write_blender_layout_capture, write_sim_capture  # noqa: E402
 
 from gg_core.cli import main  # noqa: E402
-from gg_core.commands.bench_diagnose import (confusion, effect_params, parameter_error, region_overlap,  # noqa: E402
-                                             summarize, truth_parameters)
+from gg_core.commands.bench_diagnose import (capture_of, case_name, confusion, effect_params,  # noqa: E402
+                                             parameter_error, region_overlap, summarize, truth_parameters)
 
 
 def test_diagnose_refuses_a_missing_capture_with_one_line(tmp_path, capsys):
@@ -82,6 +83,18 @@ def test_bench_scoring():
     assert table[0].split()[-3:] == ["gravity", "none", "wind"]
     assert [int(v) for v in table[-1].split()[1:]] == [1, 0, 0]      # wind named gravity
     assert np.isfinite(summary["mean_heldout_gain_when_named"])
+
+
+def test_bench_captures_of_our_simulator_resimulate_the_blender_reference_of_their_seed(tmp_path):
+    args = argparse.Namespace(cache=tmp_path, garment="sheet", truth_simulator="blender")
+    reference = write_blender_layout_capture(tmp_path / case_name(args, "none", 0.0, 3))   # stands in for Blender's
+    args.truth_simulator = "ours"
+    name = case_name(args, "air_drag", 1.0, 3)
+    capture = capture_of(args, name, 3, "air_drag", effect_params("air_drag", 1.0))
+    assert name == "ours_sheet_air_drag_s1_seed3" and capture == tmp_path / name
+    truth = json.loads((capture / "truth.json").read_text())
+    assert truth["true_parameters"] == {"mass_damping.alpha": pytest.approx(10.0)}
+    assert truth["material"]["ours"]["substeps"] == 4 and reference.name in truth["generator"]
 
 
 def test_region_overlap_scores_where_a_region_effect_was_placed():

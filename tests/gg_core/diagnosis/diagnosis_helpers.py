@@ -3,6 +3,7 @@ known material and optionally a known extra force (fast, exact physics): a sheet
 to a swaying sphere 'body', written in the capture layout (ground-truth meshes only)."""
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -12,7 +13,7 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
 
 from physics_helpers import sheet, uv_sphere  # noqa: E402
 
-from gg_core.geometry.meshio import write_ply  # noqa: E402
+from gg_core.geometry.meshio import write_obj, write_ply  # noqa: E402
 from gg_core.physics.cloth import Cloth  # noqa: E402
 from gg_core.physics.forces import make_terms  # noqa: E402
 from gg_core.physics.material import Material  # noqa: E402
@@ -55,4 +56,25 @@ def write_sim_capture(root: Path, extra: dict[str, dict] | None = None, n_frames
             write_ply(root / name / "gt" / "garment" / f"{k:06d}.ply", traj[k], f)
             write_ply(root / name / "body" / f"{k:06d}.ply", body[k], bf)
     write_json(root / "truth.json", {"split": {"train_sequences": ["a", "b"], "heldout_sequences": ["c"]}})
+    return root
+
+
+# the truth.json fields of a Blender synth capture that re-simulating it reads (gg_core/diagnosis/resimulated.py)
+BLENDER_TRUTH = {"preset": {"fps": 30},
+                 "material": {"blender_cloth": {"mass": 0.3, "tension_stiffness": 15.0, "compression_stiffness": 15.0,
+                                                "shear_stiffness": 5.0, "bending_stiffness": 0.5},
+                              "blender_body_collision": {"cloth_friction": 5.0}, "gravity": [0.0, -9.81, 0.0]}}
+
+
+def write_blender_layout_capture(root: Path) -> Path:
+    """The hanging sheet's capture (write_sim_capture, 6 frames) in the Blender synth's layout: its template and
+    regions ('patch' and 'side_seam': the lower half) and the truth fields of BLENDER_TRUTH."""
+    write_sim_capture(root, n_frames=6)
+    v, f, pinned = hanging_sheet()
+    write_obj(root / "gt" / "template.obj", v, f)
+    low = (v[:, 1] < np.median(v[:, 1])).astype(np.float64)
+    np.savez(root / "gt" / "regions.npz", patch=low, side_seam=low)
+    truth = json.loads((root / "truth.json").read_text())
+    truth.update(BLENDER_TRUTH, garment={"pinned_vertices": np.flatnonzero(pinned).tolist()})
+    (root / "truth.json").write_text(json.dumps(truth))
     return root
