@@ -65,6 +65,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--truth-simulator", choices=("blender", "ours"), default="blender",
                         help="what moves the captures' garments: Blender's cloth, or our own simulator on the same "
                              "bodies and pins (the well-specified check, gg_core/diagnosis/resimulated.py)")
+    parser.add_argument("--rest-given", action="store_true",
+                        help="give each diagnosis the garment's unloaded template as its rest mesh (gg diagnose "
+                             "--rest-mesh), as a user with the sewing pattern could; default: the first frame")
     parser.add_argument("--fit-horizon", type=int, default=3,
                         help="frames each fitted observed state is predicted ahead (gg diagnose --fit-horizon)")
 
@@ -197,7 +200,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     signal, step_change = (0.0, 0.0) if hidden == "none" else effect_sizes_of(args, name, seed, hidden, params)
     truth = json.loads((capture / "truth.json").read_text())
     true_class = SYNTH_EFFECT_CLASS[truth["effect"]["name"]]
-    project = args.cache / "projects" / f"{name}_noise{noise:g}"
+    project = args.cache / "projects" / f"{name}_noise{noise:g}{'_rest' if args.rest_given else ''}"
     reference, region_path = [], ""
     if true_class != "none":
         reference = [CLASS_CANDIDATE[true_class]]
@@ -210,7 +213,8 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     report = json.loads(run_diagnose(DiagnoseRequest(
         capture=capture, project=project, noise_mm=noise, seed=seed, bootstrap=args.bootstrap,
         fit_horizon=args.fit_horizon,
-        reference=reference, reference_region=region_path, progress="none")).read_text())
+        reference=reference, reference_region=region_path,
+        rest_mesh=str(capture / "gt" / "template.obj") if args.rest_given else "", progress="none")).read_text())
     predicted = report["accepted_classes"][0] if report["accepted_classes"] else "none"
     accepted = next((e for e in report["effects"] if report["accepted"] and e["name"] == report["accepted"][0]),
                     None)
@@ -220,6 +224,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     gap = None if ref is None else before - ref["heldout_l2"]
     return {
         "capture": name, "effect": effect, "strength": strength, "seed": seed, "noise_mm": noise,
+        "truth_simulator": args.truth_simulator, "rest_given": args.rest_given,
         "true_class": true_class, "predicted": predicted, "accepted": report["accepted"],
         "correct": predicted == true_class,
         "proposed": report["selection"]["order"],

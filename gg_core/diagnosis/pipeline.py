@@ -167,7 +167,7 @@ def fit_config(req: DiagnoseRequest, iterations: int) -> FitConfig:
 
 
 def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, body_faces: np.ndarray,
-              attached: np.ndarray, hands: np.ndarray | None, progress: Progress
+              attached: np.ndarray, hands: np.ndarray | None, rest: np.ndarray, progress: Progress
               ) -> tuple[ImplicitSimulator, BehaviorParams, dict[str, float], list[np.ndarray], float]:
     """The global-parameter fit from each of MARGIN_STARTS, kept by the training sequences' free-rollout error;
     also returns the kept fit's free rollouts of the training sequences (the activity map compares them) and
@@ -189,7 +189,7 @@ def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, bo
     collider = BodyCollider(body_faces, train[0].body.shape[1], exclude=hands)
     best, starts = None, {}
     for scale in MARGIN_STARTS:
-        cloth = Cloth(train[0].garment[0], faces, pinned=attached)
+        cloth = Cloth(rest, faces, pinned=attached)
         terms = make_terms(BASELINE_TERMS, {
             "collision": {"margin": scale * TERMS["collision"].defaults["margin"]},
             "viscoelastic_damping": {"tau": INITIAL_LOSS_FACTOR / (2.0 * np.pi)}})
@@ -207,13 +207,14 @@ def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, bo
 
 def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed], faces: np.ndarray,
              body_faces: np.ndarray, attached: np.ndarray, hands: np.ndarray | None,
-             reference_region: np.ndarray | None, progress: Progress) -> Result:
+             reference_region: np.ndarray | None, rest: np.ndarray, progress: Progress) -> Result:
     """Thresholds, iterations and reference candidates come from `req`; `hands` are body vertices that do not
-    collide, `reference_region` the region reference trials of region candidates use."""
+    collide, `reference_region` the region reference trials of region candidates use, `rest` the garment's rest
+    positions (stages.diagnose.rest_state)."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     sim, params, starts, train_rollouts, baseline_train_l2 = _baseline(req, train, faces, body_faces, attached,
-                                                                       hands, progress)
+                                                                       hands, rest, progress)
     baseline_l2 = float(np.mean([rollout_error(sim, obs, attached) for obs in heldout]))
     timings["baseline_s"] = time.perf_counter() - t0
 

@@ -33,6 +33,17 @@ def test_diagnose_refuses_zero_workers_with_one_line(tmp_path, capsys):
     assert len(err) == 1 and "--workers must be at least 1" in err[0]
 
 
+def test_diagnose_refuses_a_rest_mesh_of_another_topology_with_one_line(tmp_path, capsys):
+    from gg_core.geometry.meshio import write_ply
+
+    capture = write_sim_capture(tmp_path / "capture", n_frames=10)
+    write_ply(tmp_path / "rest.ply", np.zeros((5, 3)))
+    assert main(["diagnose", str(capture), "--project", str(tmp_path / "p"), "--rest-mesh",
+                 str(tmp_path / "rest.ply"), "--progress", "none"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "rest mesh has 5 vertices" in err[0]
+
+
 def test_diagnose_command_prints_the_verdict(tmp_path, capsys):
     capture = write_sim_capture(tmp_path / "capture", n_frames=10)
     code = main(["diagnose", str(capture), "--project", str(tmp_path / "p"), "--substeps", "1",

@@ -137,3 +137,19 @@ def test_noisy_sequences_are_smoothed_and_trimmed_clean_ones_left_alone(tmp_path
     assert not denoise(req, _loaded(0.0015)).smoothed
     with pytest.raises(InputError, match="too short"):
         denoise(DiagnoseRequest(capture=tmp_path, project=tmp_path, denoise="on"), _loaded(0.0, n_frames=10))
+
+
+def test_the_rest_state_is_the_given_unloaded_mesh_else_the_first_frame(tmp_path):
+    from gg_core.geometry.meshio import write_ply
+    from gg_core.stages.diagnose import rest_state
+
+    first = np.random.default_rng(0).uniform(size=(12, 3))
+    log = {"remeshed": False, "observed_vertices": 12}
+    assert rest_state(DiagnoseRequest(capture=tmp_path, project=tmp_path), first, log) is first
+    write_ply(tmp_path / "rest.ply", first * 1.1)
+    req = DiagnoseRequest(capture=tmp_path, project=tmp_path, rest_mesh=str(tmp_path / "rest.ply"))
+    assert np.allclose(rest_state(req, first, log), first * 1.1)
+    with pytest.raises(InputError, match="12"):
+        rest_state(req, first[:10], log)                       # another topology
+    with pytest.raises(InputError, match="remeshed"):
+        rest_state(req, first, {"remeshed": True, "observed_vertices": 7000})
