@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from gg_core.diagnosis.confirm import Trial
-from gg_core.diagnosis.pipeline import confirmed, implausible, judge_reference, propose
+from gg_core.diagnosis.pipeline import confirmed, implausible, judge_reference, propose, ranked, selected
 from gg_core.diagnosis.selection import Selection
 from gg_core.physics.cloth import Cloth
 
@@ -20,6 +20,17 @@ def test_selected_candidates_come_first_then_the_others_by_explained_share_even_
     assert propose(_selection(), 0.5, 12) == ["air_drag", "wind", "gravity_offset", "mass_damping"]
     assert propose(_selection(), 0.5, 2) == ["air_drag", "wind"]
     assert propose(_selection(), 0.95, 12)[0] == "wind"          # not selected often enough: ranked with the rest
+
+
+def test_confirmed_candidates_the_regression_selected_are_accepted_before_better_gaining_others():
+    trials = {n: Trial([n], l2, 1.0, 0.01) for n, l2 in (("wind", 0.0093), ("gravity_offset", 0.0099),
+                                                         ("mass_damping", 0.0090))}
+    sel = Selection(1.0, ["gravity_offset", "air_drag"], {}, {}, {},
+                    inclusion={"gravity_offset": 0.7, "air_drag": 0.3})
+    assert selected(sel, 0.5) == ["gravity_offset"]
+    assert ranked(["wind", "gravity_offset", "mass_damping"], trials, ["gravity_offset"]) == \
+        ["gravity_offset", "mass_damping", "wind"]
+    assert ranked(["wind", "mass_damping"], trials, ["gravity_offset"]) == ["mass_damping", "wind"]   # none passed
 
 
 def test_confirmation_needs_the_heldout_gain_and_better_training_rollouts():
