@@ -10,7 +10,7 @@ of our force terms or region fields. What the diagnosis's baseline then lacks is
 the diagnosis itself: does it name what is missing, and gain what the simulator given the effect gains.
 
 Each Blender effect (gg_core/synth/effects.py) is translated into our parameters as the benchmark's parameter
-errors compare them (commands/bench_diagnose.truth_parameters), where that is defined:
+errors compare them (blender_units.truth_parameters), where that is defined:
 air damping -> mass damping alpha = 0.01 air_damping fps / mass; gravity -> the same gravity vector as an offset
 from -9.81 y; friction -> Blender's added Coulomb coefficient 0.01 (friction - reference friction) added to our
 default 0.5; shrink and stiff patch -> the same scale on the same region (rest lengths; stretch and bending
@@ -41,6 +41,7 @@ from ..physics.simulator import ClothState, ImplicitSimulator
 from ..physics.solver import SolverOptions
 from ..storage import write_json
 from ..synth.effects import GRAVITY, resolve_effect
+from .blender_units import truth_parameters
 from .library import apply_region
 from .pipeline import BASELINE_TERMS
 
@@ -71,27 +72,26 @@ def our_effect(name: str, assignments: list[str], reference_truth: dict) -> tupl
     material = reference_truth["material"]
     resolved = resolve_effect(name, assignments, material["blender_cloth"])
     p = resolved.params
+    gravity = np.asarray(resolved.blender.get("gravity", material["gravity"]), np.float64)
+    comparable = truth_parameters({"effect": resolved.to_json(), "preset": reference_truth["preset"],
+                                   "material": {**material, "gravity": gravity.tolist()}})
     if name == "air_drag":
-        alpha = 0.01 * float(p["air_damping"]) * float(reference_truth["preset"]["fps"]) / float(
-            material["blender_cloth"]["mass"])
-        ours = OurEffect({"mass_damping": {"alpha": alpha}}, parameters={"mass_damping.alpha": alpha})
+        ours = OurEffect({"mass_damping": {"alpha": comparable["mass_damping.alpha"]}}, parameters=comparable)
     elif name == "gravity":
-        g = np.asarray(resolved.blender["gravity"], np.float64)
-        offset = g - np.array([0.0, -GRAVITY, 0.0])
-        ours = OurEffect({"gravity_offset": {"delta_g": tuple(offset)}},
-                         parameters={"gravity_offset.delta_g": [float(g[0]), float(g[2])]})
+        offset = gravity - np.array([0.0, -GRAVITY, 0.0])
+        ours = OurEffect({"gravity_offset": {"delta_g": tuple(offset)}}, parameters=comparable)
     elif name == "friction":
+        # Blender's added Coulomb coefficient added to ours (truth_parameters scores Blender's total)
         added = 0.01 * (float(p["friction"]) - float(material["blender_body_collision"]["cloth_friction"]))
         mu = TERMS["body_friction"].defaults["mu"] + added
         ours = OurEffect({"body_friction": {"mu": mu}}, parameters={"body_friction.mu": mu})
     elif name == "shrink":
-        scale = 1.0 - float(p["factor"])
-        ours = OurEffect(region=str(p["region"]), region_logs={"rest": math.log(scale)},
-                         parameters={"region.rest_scale": scale})
+        ours = OurEffect(region=str(p["region"]), region_logs={"rest": math.log(comparable["region.rest_scale"])},
+                         parameters=comparable)
     elif name == "stiff_patch":
-        factor = float(p["factor"])
-        ours = OurEffect(region=str(p["region"]), region_logs={"stretch": math.log(factor), "bending": math.log(factor)},
-                         parameters={"region.stretch_scale": factor})
+        log_factor = math.log(comparable["region.stretch_scale"])
+        ours = OurEffect(region=str(p["region"]), region_logs={"stretch": log_factor, "bending": log_factor},
+                         parameters=comparable)
     elif name == "wind":
         field_ = resolved.blender["force_fields"][0]
         velocity = np.asarray(field_["direction"], np.float64) * WIND_SPEED_PER_STRENGTH * float(p["strength"])

@@ -148,17 +148,14 @@ def rest_state(req: DiagnoseRequest, first_frame: np.ndarray, mesh_log: dict) ->
     the template against 9.4 mm from the first frame."""
     if not req.rest_mesh:
         return first_frame
-    vertices, _ = read_mesh(req.rest_mesh)
     if mesh_log["remeshed"]:
         raise InputError("a rest mesh cannot be used when the observed meshes are remeshed for simulation",
                          req.rest_mesh, f"pass --sim-vertices 0 (the meshes have {mesh_log['observed_vertices']} "
                                         "vertices)")
+    vertices, _ = read_mesh(req.rest_mesh)      # refuses unreadable files and non-finite coordinates
     if vertices.shape != first_frame.shape:
         raise InputError(f"the rest mesh has {len(vertices)} vertices, the observed garment meshes "
                          f"{len(first_frame)}", req.rest_mesh, "give the unloaded garment in the template's topology")
-    if not np.isfinite(vertices).all():
-        raise InputError("the rest mesh has non-finite vertex positions", req.rest_mesh,
-                         "re-export the unloaded garment")
     return vertices
 
 
