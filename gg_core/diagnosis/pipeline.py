@@ -189,7 +189,7 @@ def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, bo
     collider = BodyCollider(body_faces, train[0].body.shape[1], exclude=hands)
     best, starts = None, {}
     for scale in MARGIN_STARTS:
-        cloth = Cloth(rest, faces, pinned=attached)
+        cloth = Cloth(rest, faces, pinned=attached, flat=not req.rest_mesh)   # stages.diagnose.rest_state
         terms = make_terms(BASELINE_TERMS, {
             "collision": {"margin": scale * TERMS["collision"].defaults["margin"]},
             "viscoelastic_damping": {"tau": INITIAL_LOSS_FACTOR / (2.0 * np.pi)}})

@@ -4,8 +4,9 @@ it through the force library, refit, and show the held-out rollout error before 
 0. Denoising: the noise level of every sequence is estimated from its third time differences; above 0.5 mm all
    sequences are smoothed in time (gg_core/diagnosis/noise.py: noisy velocities make any damping look right).
 1. Baseline: the behaviour fit with global parameters only (material, internal damping, contact margin;
-   per-vertex fields could silently absorb a missing effect), rest shape = the first training frame. Fits predict
-   `fit_horizon` frames ahead of observed states (pipeline.fit_config).
+   per-vertex fields could silently absorb a missing effect); rest state = the given rest mesh, else the first
+   training frame bending towards flat (rest_state). Fits predict `fit_horizon` frames ahead of observed states
+   (pipeline.fit_config).
 2. Residual: the one-frame position error of the simulator's own step on the training sequences, pooled in the
    weak form, after re-adjusting the global parameters to it (gg_core/diagnosis/residuals.py).
 3. Localization: per-vertex map, per-frame curve, their best-correlated state features, the standout region
@@ -145,7 +146,15 @@ def rest_state(req: DiagnoseRequest, first_frame: np.ndarray, mesh_log: dict) ->
     the held-out sequence out 0.17 mm from the recording with the garment's unloaded template as rest state and
     12.0 mm with the first frame; the baseline fit from the first frame reaches 6.9 mm by a 5x lighter, stiffer
     cloth without bending. On Blender's skirt (nothing hidden, seed 1) the baseline fit gives 7.8 mm held-out from
-    the template against 9.4 mm from the first frame."""
+    the template against 9.4 mm from the first frame.
+
+    Why, without a rest mesh, the cloth bends towards flat (pipeline._baseline) and not towards the first frame's
+    folds: most of that 12.0 mm is the folds. On the same capture the true model rolls out 10.6 mm with the
+    template's rest lengths and the first frame's dihedral angles, 4.2 mm with the first frame's lengths and the
+    template's angles, and 4.5 mm with the first frame's lengths bending towards flat (the template's mean |angle|
+    is 0.07 rad, the first frame's 0.21, correlation 0.28). Rest lengths from the frames add little: the per-edge
+    median over the training frames 3.9 mm, lower percentiles worse (p20 5.0, p5 5.5 mm). The baseline fit bending
+    towards flat: 7.2 -> 4.5 mm held-out there (one margin start), 9.4 -> 8.6 mm on Blender's skirt."""
     if not req.rest_mesh:
         return first_frame
     if mesh_log["remeshed"]:
@@ -208,7 +217,7 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
         "train_sequences": train_names, "heldout_sequences": heldout_names, "source": source,
         "noise_mm": req.noise_mm, "denoising": denoised.to_json(), "vertices": len(train[0].garment[0]),
         "simulation_mesh": mesh_log, "attached_vertices": int(attached.sum()),
-        "rest_state": req.rest_mesh or f"first frame of {train_names[0]}",
+        "rest_state": req.rest_mesh or f"first frame of {train_names[0]}, bending towards flat",
         "outputs": {"residual_vertex": str(out / "residual_vertex.npy"),
                     "residual_vertex_unit": "m/s^2 (one-frame position error over the frame time squared)",
                     "activity_vertex": str(out / "activity_vertex.npy"),
