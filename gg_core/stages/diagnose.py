@@ -75,8 +75,8 @@ class DiagnoseRequest:
     min_explained: float = 0.05        # share of the residual a selected candidate must explain
     min_inclusion: float = 0.5         # bootstrap inclusion probability a candidate needs to be tried
     min_gain: float = 0.10             # relative held-out rollout improvement needed to accept ...
-    min_gain_mm: float = 0.5           # ... and absolute (below this the rollouts already match the recording
-                                       # within what registered positions are measured to)
+    min_gain_mm: float = 0.25          # ... and absolute (below this the rollouts already match the recording;
+                                       # pipeline.confirmed says where it lies)
     max_trials: int = 12               # candidates refitted and judged on rollouts (12: every one that acts)
     bootstrap: int = 100
     reference: list[str] = field(default_factory=list)   # candidates always trialled (benchmarks), never accepted

@@ -39,7 +39,10 @@ def test_confirmation_needs_the_heldout_gain_and_better_training_rollouts():
     assert not confirmed(Trial(["a"], 0.0095, 1.0, 0.011), null, 0.10, 0.5)    # held-out gain 5 % < 10 %
     assert not confirmed(Trial(["a"], 0.0080, 1.0, 0.0125), null, 0.10, 0.5)   # lucky on the held-out sequence only
     tiny = Trial([], 0.00022, 1.0, 0.0002)                              # the baseline already matches
-    assert not confirmed(Trial(["a"], 0.00011, 1.0, 0.0001), tiny, 0.10, 0.5)   # 51 %, but 0.11 mm
+    assert not confirmed(Trial(["a"], 0.00011, 1.0, 0.0001), tiny, 0.10, 0.25)   # 51 %, but 0.11 mm
+    small = Trial([], 0.00129, 1.0, 0.0048)                             # hidden friction, rest mesh given
+    friction = Trial(["body_friction"], 0.00094, 1.0, 0.0039)           # 27 %, 0.35 mm
+    assert confirmed(friction, small, 0.10, 0.25) and not confirmed(friction, small, 0.10, 0.5)
 
 
 def test_trials_must_beat_the_better_of_the_baseline_fit_and_its_refit_on_both_rollouts():
