@@ -150,6 +150,7 @@ class Candidate:
     region_from: str = "map"    # "map": the localization's region (localize.py); "scan": its own (scan.py)
     plausibility: Callable[[dict[str, object], Cloth], str | None] | None = None
     rollout_values: tuple[float, ...] = ()   # coefficients also tried on training rollouts (confirm.trial)
+    needs_unloaded_rest: bool = False        # tried only against a given rest mesh (pipeline.usable_candidates)
 
     def implausible(self, values: dict[str, object], cloth: Cloth) -> str | None:
         """Why the refitted `values` (Trial.values) are not physical for `cloth` (its rest shape), or None."""
@@ -317,6 +318,6 @@ CANDIDATES: tuple[Candidate, ...] = (
     Candidate("rest_length_region", "rest_length",
               "rest lengths changed on a region (tight seam, elastic band): static tension along a curve",
               ("rest_length_change",), "1", (-0.5, 0.5), _region_columns(("rest",)), _region_model(("rest",)),
-              needs_region=True, region_from="scan"),
+              needs_region=True, region_from="scan", needs_unloaded_rest=True),
 )
 BY_NAME: dict[str, Candidate] = {c.name: c for c in CANDIDATES}

@@ -152,6 +152,8 @@ def write_html(path: Path, report: dict, vertices: np.ndarray, faces: np.ndarray
         f"<td>{_pct(e.get('heldout_gain'))}</td><td>{_pct(e.get('train_rollout_gain'))}</td>"
         f"<td>{html.escape(e.get('implausible') or '')}</td></tr>"
         for e in report["effects"])
+    withheld = "".join(f"<p>Not tried: {html.escape(n)}, {html.escape(why)}.</p>"
+                       for n, why in report.get("withheld_candidates", {}).items())
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>Missing-physics diagnosis</title>
 <style>body{{font-family:sans-serif;max-width:980px;margin:2em auto}}
 td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc}}</style></head><body>
@@ -167,7 +169,7 @@ td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc
 {loc['step_feature']['spearman']:.2f}.</p><img src="{plot}" alt="residual over time">
 <h2>Candidates</h2><table><tr><th>candidate</th><th>class</th><th>explained</th><th>bootstrap inclusion</th>
 <th>coefficients (regression)</th><th>held-out gain</th><th>training-rollout gain</th><th>not physical because</th>
-</tr>{rows}</table>
+</tr>{rows}</table>{withheld}
 <p>Held-out rollout error: {before * 1e3:.2f} mm before, {after * 1e3:.2f} mm after.</p></body></html>"""
     with atomic_path(path) as tmp:
         tmp.write_text(page)

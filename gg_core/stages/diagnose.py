@@ -12,7 +12,8 @@ it through the force library, refit, and show the held-out rollout error before 
 3. Localization: per-vertex map, per-frame curve, their best-correlated state features, the standout region
    (first from the deformation activity: where the cloth stretches less than the baseline's own rollouts say);
    a rest-length region, which no map shows, is scanned for patch by patch (gg_core/diagnosis/scan.py).
-4. Selection: forward sparse regression on the candidate library with a moving-block bootstrap.
+4. Selection: forward sparse regression on the candidate library with a moving-block bootstrap (rest-length
+   changes only with a rest mesh given: pipeline.usable_candidates).
 5. Confirmation: the selected candidates, then the others by the share of the residual they explain, up to
    `max_trials`, are each added to the simulator and refitted; the best is accepted only if the held-out
    rollout error drops by at least `min_gain` (and `min_gain_mm`) and the training sequences' free rollouts

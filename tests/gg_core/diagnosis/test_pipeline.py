@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from gg_core.diagnosis.confirm import Trial
-from gg_core.diagnosis.pipeline import confirmed, implausible, judge_reference, propose, ranked, selected
+from gg_core.diagnosis.library import CANDIDATES
+from gg_core.diagnosis.pipeline import (confirmed, implausible, judge_reference, propose, ranked, selected,
+                                       usable_candidates)
 from gg_core.diagnosis.selection import Selection
 from gg_core.physics.cloth import Cloth
 
@@ -96,3 +98,12 @@ def test_a_gravity_offset_beyond_any_tilt_of_gravity_is_not_gravity(sheet):
     assert implausible(tilted((2.55, 0.0, 0.0)), sheet) is None
     assert implausible(tilted((6.0, -30.0, 7.5)), sheet) is None         # 9.6 m/s^2 sideways: a steep tilt
     assert "146 m/s^2" in implausible(tilted((144.6, 0.0, -23.5)), sheet)
+
+
+def test_rest_length_changes_are_withheld_without_an_unloaded_rest_mesh():
+    loaded, why = usable_candidates(rest_given=False)
+    unloaded, none_withheld = usable_candidates(rest_given=True)
+    assert [c.name for c in unloaded] == [c.name for c in CANDIDATES] and none_withheld == {}
+    assert set(why) == {"rest_length_region"} and "--rest-mesh" in why["rest_length_region"]
+    assert [c.name for c in loaded] == [c.name for c in CANDIDATES if c.name != "rest_length_region"]
+    assert len(loaded) >= 8                      # the library the issue asks for, still without rest lengths
