@@ -15,10 +15,10 @@ it through the force library, refit, and show the held-out rollout error before 
 4. Selection: forward sparse regression on the candidate library with a moving-block bootstrap (rest-length
    changes only with a rest mesh given: pipeline.usable_candidates).
 5. Confirmation: the selected candidates, then the others by the share of the residual they explain, up to
-   `max_trials`, are each added to the simulator and refitted; the best is accepted only if the held-out
-   rollout error drops by at least `min_gain` (and `min_gain_mm`) and the training sequences' free rollouts
-   improve too, each against the better of the baseline fit and its refit without candidates
-   (pipeline.judge_reference).
+   `max_trials`, are each added to the simulator and refitted; one is confirmed only if the held-out rollout
+   error drops by at least `min_gain` (and `min_gain_mm`) and the training sequences' free rollouts improve
+   too, each against the better of the baseline fit and its refit without candidates (pipeline.judge_reference);
+   of the confirmed, the one rolling out the training sequences best is accepted (pipeline.ranked).
 
 Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply) or, for synthetic captures, the ground-truth meshes,
 optionally with spatially correlated noise (motion.py: `--source`, auto by default). truth.json is read only for
