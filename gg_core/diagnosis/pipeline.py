@@ -238,7 +238,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
 
     t0 = time.perf_counter()
     ctx = Context.build(sim, batch, loc.region, predicted)
-    scans = {c.name: scan_region(c, ctx, pooling, predicted, y, n_cols, req.probe_acceleration, req.min_explained)
+    scans = {c.name: scan_region(c, ctx, pooling, predicted, y, n_cols, req.probe_acceleration)
              for c in candidates if c.region_from == "scan"}
     contexts = {c.name: replace(ctx, region=scans[c.name].region) if c.name in scans else ctx for c in candidates}
     progress.step("region scan")

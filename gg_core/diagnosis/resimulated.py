@@ -142,8 +142,8 @@ def _stacked(paths: list[Path]) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([m[0] for m in meshes]), meshes[0][1]
 
 
-def resimulate(reference: Path, out: Path, effect: str, assignments: list[str], hands_of: Callable[[int], np.ndarray | None],
-               substeps: int) -> Path:
+def resimulate(reference: Path, out: Path, effect: str, assignments: list[str],
+               hands_of: Callable[[int], np.ndarray | None], substeps: int) -> Path:
     """Write capture `out`: the Blender capture `reference` (nothing hidden) with its garment simulated again by
     our simulator with hidden `effect` (module docstring), `substeps` per frame. `hands_of(n_body_vertices)` gives
     the body vertices that do not collide. Written to a temporary folder renamed at the end, so an interrupted run

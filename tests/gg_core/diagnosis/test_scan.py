@@ -8,7 +8,7 @@ from diagnosis_helpers import MATERIAL, hanging_sheet
 
 from gg_core.diagnosis.library import BY_NAME, Context, apply_region
 from gg_core.diagnosis.residuals import build_frames, make_pooling, residual
-from gg_core.diagnosis.scan import grow, patch_adjacency, scan_region
+from gg_core.diagnosis.scan import MIN_SHARE, grow, patch_adjacency, scan_region
 from gg_core.physics.cloth import Cloth
 from gg_core.physics.fitting import Observed
 from gg_core.physics.forces import make_terms
@@ -42,6 +42,7 @@ def test_grow_takes_the_neighbouring_patches_the_residual_came_from():
     chosen, share, alone = grow(REST, rng.normal(size=600), nuisance, columns, groups, _chain(10), 5,
                                 0.05)
     assert chosen == [] and alone.max() < 0.05              # noise: no region
+    assert grow(REST, rng.normal(size=600), nuisance, columns, groups, _chain(10), 5, MIN_SHARE)[0] == []
 
 
 def test_hidden_rest_length_change_on_a_strip_is_found_there():
@@ -66,7 +67,7 @@ def test_hidden_rest_length_change_on_a_strip_is_found_there():
     pooling = make_pooling(model, batch, patch_vertices=5, window=4)
     y = pooling.rows(res)
     result = scan_region(REST, Context.build(model, batch), pooling, batch.x_next - res, y, np.ones((len(y), 1)),
-                         0.5, 0.05)
+                         0.5)
     assert result.region is not None and result.explained > 0.5
     found = result.region > 0
     on_strip = strip & (model.num.free > 0)
