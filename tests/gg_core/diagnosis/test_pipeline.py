@@ -109,3 +109,15 @@ def test_rest_length_changes_are_withheld_without_an_unloaded_rest_mesh():
     assert set(why) == {"rest_length_region"} and "--rest-mesh" in why["rest_length_region"]
     assert [c.name for c in loaded] == [c.name for c in CANDIDATES if c.name != "rest_length_region"]
     assert len(loaded) >= 8                      # the library the issue asks for, still without rest lengths
+
+
+def test_region_refits_outside_the_candidates_range_are_not_that_physics(sheet):
+    def region(name: str, **scales: float) -> Trial:
+        return Trial([name], 0.008, 1.0, 0.01, {f"region.{k}_scale": v for k, v in scales.items()})
+
+    assert implausible(region("heavy_region", density=3.0), sheet) is None
+    assert "x0.043" in implausible(region("heavy_region", density=0.043), sheet)   # the own-sim seam shrink's refit
+    assert implausible(region("region_stiffness", stretch=0.1, bending=25.0), sheet) is None   # at the bound
+    assert "bending" in implausible(region("region_stiffness", stretch=1.0, bending=400.0), sheet)
+    assert implausible(region("rest_length_region", rest=0.72), sheet) is None
+    assert implausible(region("rest_length_region", rest=0.3), sheet) is not None
