@@ -6,7 +6,6 @@ import json
 from pathlib import Path
 
 from ..cli import add_progress_option, add_sim_vertices_option, add_source_option
-from ..stages.diagnose import DiagnoseRequest
 
 HELP = "missing-physics diagnosis: residual map and curve, named effect, refit, held-out rollout error before/after"
 
@@ -41,7 +40,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="frames each of them is predicted ahead (more: damping shows; cost grows with it)")
     parser.add_argument("--min-gain", type=float, default=0.10,
                         help="relative held-out rollout improvement an effect needs to be accepted")
-    parser.add_argument("--min-gain-mm", type=float, default=DiagnoseRequest.min_gain_mm,
+    parser.add_argument("--min-gain-mm", type=float, default=0.25,     # DiagnoseRequest's (the stage imports torch)
                         help="absolute held-out rollout improvement (mm) an effect needs as well")
     parser.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates")
     parser.add_argument("--fps", type=float, default=30.0, help="frame rate of the sequences")
@@ -54,7 +53,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..stages.diagnose import run_diagnose
+    from ..stages.diagnose import DiagnoseRequest, run_diagnose
 
     req = DiagnoseRequest(capture=args.capture, project=args.project, source=args.source, train=args.train,
                           heldout=args.heldout, noise_mm=args.noise_mm, noise_length_mm=args.noise_length_mm,

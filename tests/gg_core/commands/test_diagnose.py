@@ -20,6 +20,21 @@ from gg_core.commands.bench_diagnose import (capture_of, case_name, confusion, e
                                              parameter_error, region_overlap, summarize, truth_parameters)
 
 
+def test_the_command_line_defaults_are_the_requests_and_parsing_imports_no_torch(tmp_path):
+    import subprocess  # noqa: PLC0415
+
+    from gg_core.cli import build_parser  # noqa: PLC0415
+    from gg_core.stages.diagnose import DiagnoseRequest  # noqa: PLC0415
+
+    args = build_parser().parse_args(["diagnose", str(tmp_path), "--project", str(tmp_path / "p")])
+    for name in ("min_gain", "min_gain_mm", "bootstrap", "max_samples", "fit_horizon", "substeps"):
+        assert getattr(args, name) == getattr(DiagnoseRequest, name), name
+    probe = "import sys; from gg_core.cli import build_parser; build_parser(); print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[3])
+    assert out.stdout.strip() == "False"          # `gg --help` and every command start without torch
+
+
 def test_diagnose_refuses_a_missing_capture_with_one_line(tmp_path, capsys):
     assert main(["diagnose", str(tmp_path / "nowhere"), "--project", str(tmp_path / "p")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
