@@ -305,10 +305,13 @@ def usable_candidates(rest_given: bool) -> tuple[list[Candidate], dict[str, str]
     shrink, whose first frame already holds the seam pulled in; on our own simulator's `none` capture (seed 1,
     bending towards flat) the rest-length region gained 18 % held-out (3.9 -> 3.2 mm, scale 0.979): a false
     alarm."""
-    usable = [c for c in CANDIDATES if rest_given or not c.needs_unloaded_rest]
-    withheld = {c.name: "not identifiable without an unloaded rest mesh (gg diagnose --rest-mesh): a rest-length "
-                        "change against a loaded first frame is that frame's own error"
-                for c in CANDIDATES if not (rest_given or not c.needs_unloaded_rest)}
+    usable, withheld = [], {}
+    for c in CANDIDATES:
+        if rest_given or not c.needs_unloaded_rest:
+            usable.append(c)
+        else:
+            withheld[c.name] = ("not identifiable without an unloaded rest mesh (gg diagnose --rest-mesh): a "
+                                "rest-length change against a loaded first frame is that frame's own error")
     return usable, withheld
 
 
