@@ -10,7 +10,9 @@ only helps the held-out one got lucky among the many tried). The regression only
 which also protects against effects that fit single frames but drift in free rollouts.
 
 Friction's coefficient is also chosen on the training rollouts from a grid (Candidate.rollout_values,
-rollout_choice): its stick-slip force is invisible a few frames ahead.
+rollout_choice): its stick-slip force is invisible a few frames ahead. Every other single candidate's refitted
+coefficients are then scaled by the factor that rolls the training sequences out best (rollout_scale): slow,
+quasi-static forces (a gravity tilt) barely show a few frames ahead either.
 
 Vector coefficients (a wind's pressure, a gravity tilt) are refitted as one log-scale of the regression's vector,
 so the refit keeps its direction. Measured and not kept (session 6): refitting each component freely (offsets in
@@ -25,6 +27,7 @@ from __future__ import annotations
 import copy
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import torch
@@ -34,6 +37,9 @@ from ..physics.fitting import BehaviorParams, FitConfig, Observed, TeacherForced
 from ..physics.material import MATERIAL_NAMES
 from ..physics.simulator import ImplicitSimulator
 from .library import Candidate, Context, ModelChange, apply_region, with_terms
+
+SCALE_RANGE = (0.25, 8.0)   # factors on a candidate's refitted coefficients tried on training rollouts
+SCALE_EVALUATIONS = 11      # golden-section steps: the factor to within 3 %
 
 
 class CandidateParams(BehaviorParams):
@@ -118,9 +124,60 @@ def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple
     start_label = "regression"
     if len(chosen) == 1 and chosen[0][0].rollout_values:
         train_error, start_label = rollout_choice(sim, chosen[0][0], ctx, train, pinned, train_error)
+    elif len(chosen) == 1:
+        train_error, start_label = rollout_scale(sim, params, len(base_fit), train, pinned, train_error)
     error = float(np.mean([rollout_error(sim, obs, pinned) for obs in heldout]))
     return Trial([c.name for c, _ in chosen], error, loss, train_error, params.values(), time.perf_counter() - start,
                  start_label)
+
+
+def rollout_scale(sim: ImplicitSimulator, params: CandidateParams, first: int, train: list[Observed],
+                  pinned: np.ndarray, refit_error: float) -> tuple[float, str]:
+    """Scale the candidate's refitted term coefficients (params.term_s from index `first` on) by the factor in
+    SCALE_RANGE that rolls the training sequences out best (golden section on its logarithm, SCALE_EVALUATIONS
+    rollouts of each), where that beats the refit; leaves it applied, returns that error and where the value came
+    from.
+
+    Why: the refit predicts observed states a few frames ahead, where a slow force barely shows against the
+    material, which the refit moves too. Measured offline on stored benchmark trials (our simulator, hidden
+    gravity tilt of 2.55 m/s^2, seed 1): the refit reached a tilt of 0.79 (held-out 11.6 -> 6.4 mm), scaled by
+    2.55 on the training rollouts 2.02 (held-out 3.8 mm, -67 %); the same search on every candidate of five
+    `none` captures (both simulators) gained at most 5 % held-out, where 10 % is needed."""
+    if first >= len(params.term_s):
+        return refit_error, "regression"
+    refitted = params.term_s.detach().clone()
+
+    def error(log_factor: float) -> float:
+        with torch.no_grad():
+            params.term_s.copy_(refitted)
+            params.term_s[first:] += log_factor
+        params.apply(sim.cloth)
+        sim.refresh()
+        return float(np.mean([rollout_error(sim, obs, pinned) for obs in train]))
+
+    log_factor, best = golden_section(error, *np.log(SCALE_RANGE), SCALE_EVALUATIONS)
+    if best >= refit_error:
+        log_factor, best = 0.0, refit_error
+    error(log_factor)
+    return best, "regression" if log_factor == 0.0 else f"regression, rollout scale x{np.exp(log_factor):.3g}"
+
+
+def golden_section(f: Callable[[float], float], lo: float, hi: float, evaluations: int) -> tuple[float, float]:
+    """(argmin, min) of `f` on [lo, hi] by golden-section search with `evaluations` calls (f unimodal there)."""
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    a, b = lo, hi
+    c, d = b - ratio * (b - a), a + ratio * (b - a)
+    fc, fd = f(c), f(d)
+    for _ in range(evaluations - 2):
+        if fc < fd:
+            b, d, fd = d, c, fc
+            c = b - ratio * (b - a)
+            fc = f(c)
+        else:
+            a, c, fc = c, d, fd
+            d = a + ratio * (b - a)
+            fd = f(d)
+    return (c, fc) if fc < fd else (d, fd)
 
 
 def rollout_choice(sim: ImplicitSimulator, cand: Candidate, ctx: Context, train: list[Observed], pinned: np.ndarray,

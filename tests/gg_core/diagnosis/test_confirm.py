@@ -1,14 +1,16 @@
-"""Confirming trials: friction's coefficient chosen on the training rollouts, which a few-frame refit cannot see."""
+"""Confirming trials: coefficients chosen on the training rollouts, which a few-frame refit barely sees (friction's
+grid, every other candidate's scale)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from gg_core.diagnosis.confirm import rollout_choice
+from gg_core.diagnosis.confirm import CandidateParams, golden_section, rollout_choice, rollout_scale
 from gg_core.diagnosis.library import BY_NAME, Context
 from gg_core.physics.cloth import Cloth
 from gg_core.physics.contact import BodyCollider
 from gg_core.physics.fitting import Observed, rollout_error
-from gg_core.physics.forces import make_terms
+from gg_core.physics.forces import DEFAULT_TERMS, make_terms
 from gg_core.physics.simulator import ClothState, ImplicitSimulator
 
 from physics_helpers import sheet, uv_sphere
@@ -47,3 +49,48 @@ def test_friction_is_chosen_on_training_rollouts():
                                   pinned, rollout_error(truth, observed, pinned))
     assert label == "regression"
     assert float(next(t for t in truth.terms if t.name == "body_friction").params["mu"]) == 1.5
+
+
+def _hanging(tilt: float) -> ImplicitSimulator:
+    """A sheet pinned along one edge, falling under gravity tilted sideways by `tilt` m/s^2."""
+    v, f = sheet(6, 6, 0.3, 0.3)
+    pinned = np.abs(v[:, 2] + 0.15) < 1e-9
+    terms = make_terms([*DEFAULT_TERMS, "gravity_offset"], {"gravity_offset": {"delta_g": (tilt, 0.0, 0.0)}})
+    return ImplicitSimulator(Cloth(v, f, pinned=pinned), terms=terms)
+
+
+def test_golden_section_finds_the_minimum_of_a_unimodal_function():
+    calls = []
+
+    def f(x: float) -> float:
+        calls.append(x)
+        return (x - 0.7) ** 2 + 1.0
+
+    x, fx = golden_section(f, -1.0, 2.0, 12)
+    assert len(calls) == 12
+    assert x == pytest.approx(0.7, abs=0.02) and fx == pytest.approx(1.0, abs=1e-3)
+    assert min(calls) >= -1.0 and max(calls) <= 2.0
+
+
+def test_a_tilt_the_refit_underestimates_is_scaled_on_training_rollouts():
+    truth = _hanging(2.0)
+    rest = truth.cloth.template
+    observed = Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12),
+                        None, 30.0)
+    pinned = truth.cloth.pinned
+    sim = _hanging(0.5)
+    params = CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {})
+    before = rollout_error(sim, observed, pinned)
+    error, label = rollout_scale(sim, params, 1, [observed], pinned, before)
+    tilt = next(t for t in sim.terms if t.name == "gravity_offset").params["delta_g"].tolist()
+    assert tilt[0] == pytest.approx(2.0, rel=0.05) and tilt[1:] == [0.0, 0.0]
+    assert label.startswith("regression, rollout scale x4")
+    assert error == pytest.approx(rollout_error(sim, observed, pinned)) and error < 0.1 * before
+    assert next(t for t in sim.terms if t.name == "collision").params["margin"] == pytest.approx(
+        next(t for t in truth.terms if t.name == "collision").params["margin"])     # only the candidate's scaled
+    # at the truth no factor rolls out better: the refit's value stays
+    params = CandidateParams(truth.cloth, truth, ("collision.margin", "gravity_offset.delta_g"), None, {})
+    exact = rollout_error(truth, observed, pinned)
+    assert rollout_scale(truth, params, 1, [observed], pinned, exact) == (exact, "regression")
+    assert truth.terms[-1].params["delta_g"].tolist() == [2.0, 0.0, 0.0]
+    assert rollout_scale(truth, params, 2, [observed], pinned, exact) == (exact, "regression")   # nothing to scale
