@@ -143,7 +143,7 @@ def rollout_scale(sim: ImplicitSimulator, params: CandidateParams, first: int, t
     gravity tilt of 2.55 m/s^2, seed 1): the refit reached a tilt of 0.79 (held-out 11.6 -> 6.4 mm), scaled by
     2.55 on the training rollouts 2.02 (held-out 3.8 mm, -67 %); hidden air damping (alpha 10 /s): mass damping
     5.3 -> 12.5 /s, held-out -13 % -> -24 %. On the trials of four `none` captures (seeds 1-2, both simulators)
-    the search moved held-out gains by -12 to +6 points, none above 9 % (mass damping, Blender seed 1, 9 % before
+    the search moved held-out gains by -4 to +6 points, none above 9 % (mass damping, Blender seed 1, 9 % before
     the search too; 10 % is needed)."""
     if first >= len(params.term_s):
         return refit_error, "regression"
