@@ -149,18 +149,21 @@ def rollout_scale(sim: ImplicitSimulator, params: CandidateParams, first: int, t
         return refit_error, "regression"
     refitted = params.term_s.detach().clone()
 
-    def error(log_factor: float) -> float:
+    def scale(log_factor: float) -> None:
         with torch.no_grad():
             params.term_s.copy_(refitted)
             params.term_s[first:] += log_factor
         params.apply(sim.cloth)
         sim.refresh()
+
+    def error(log_factor: float) -> float:
+        scale(log_factor)
         return float(np.mean([rollout_error(sim, obs, pinned) for obs in train]))
 
     log_factor, best = golden_section(error, *np.log(SCALE_RANGE), SCALE_EVALUATIONS)
     if best >= refit_error:
         log_factor, best = 0.0, refit_error
-    error(log_factor)
+    scale(log_factor)
     return best, "regression" if log_factor == 0.0 else f"regression, rollout scale x{np.exp(log_factor):.3g}"
 
 
