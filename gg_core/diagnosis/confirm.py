@@ -33,7 +33,7 @@ import numpy as np
 import torch
 
 from ..physics.cloth import Cloth
-from ..physics.fitting import BehaviorParams, FitConfig, Observed, TeacherForced, minimize_lbfgs, rollout_error
+from ..physics.fitting import (BehaviorParams, FitConfig, Observed, TeacherForced, mean_rollout_error, minimize_lbfgs)
 from ..physics.material import MATERIAL_NAMES
 from ..physics.simulator import ImplicitSimulator
 from .library import Candidate, Context, ModelChange, apply_region, with_terms
@@ -120,13 +120,13 @@ def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple
     params.apply(cloth)
     sim.refresh()
     loss = refit(sim, params, train, [params.global_z, params.term_s, params.region_s], config)
-    train_error = float(np.mean([rollout_error(sim, obs, pinned) for obs in train]))
+    train_error = mean_rollout_error(sim, train, pinned)
     start_label = "regression"
     if len(chosen) == 1 and chosen[0][0].rollout_values:
         train_error, start_label = rollout_choice(sim, chosen[0][0], ctx, train, pinned, train_error)
     elif len(chosen) == 1:
         train_error, start_label = rollout_scale(sim, params, len(base_fit), train, pinned, train_error)
-    error = float(np.mean([rollout_error(sim, obs, pinned) for obs in heldout]))
+    error = mean_rollout_error(sim, heldout, pinned)
     return Trial([c.name for c, _ in chosen], error, loss, train_error, params.values(), time.perf_counter() - start,
                  start_label)
 
@@ -158,7 +158,7 @@ def rollout_scale(sim: ImplicitSimulator, params: CandidateParams, first: int, t
 
     def error(log_factor: float) -> float:
         scale(log_factor)
-        return float(np.mean([rollout_error(sim, obs, pinned) for obs in train]))
+        return mean_rollout_error(sim, train, pinned)
 
     log_factor, best = golden_section(error, *np.log(SCALE_RANGE), SCALE_EVALUATIONS)
     if best >= refit_error:
@@ -204,7 +204,7 @@ def rollout_choice(sim: ImplicitSimulator, cand: Candidate, ctx: Context, train:
     best, value, label = refit_error, target.params[key].detach().clone(), "regression"
     for added, coefficient in grid:
         target.params[key] = torch.tensor(coefficient, dtype=torch.float64)
-        error = float(np.mean([rollout_error(sim, obs, pinned) for obs in train]))
+        error = mean_rollout_error(sim, train, pinned)
         if error < best:
             best, value, label = error, target.params[key], f"rollout grid ({key} + {added:g})"
     target.params[key] = value

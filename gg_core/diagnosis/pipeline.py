@@ -13,7 +13,7 @@ from ..parallel import Step, run_jobs, worker_count
 from ..physics.cloth import Cloth
 from ..physics.contact import BodyCollider
 from ..physics.fitting import (BehaviorParams, FitConfig, Observed, fit_behavior, free_rollout, rollout_distance,
-                               rollout_error)
+                               mean_rollout_error)
 from ..physics.forces import DEFAULT_TERMS, TERMS, make_terms
 from ..physics.simulator import ImplicitSimulator
 from ..physics.solver import SolverOptions
@@ -218,7 +218,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     t0 = time.perf_counter()
     sim, params, starts, train_rollouts, baseline_train_l2 = _baseline(req, train, faces, body_faces, attached,
                                                                        hands, rest, progress)
-    baseline_l2 = float(np.mean([rollout_error(sim, obs, attached) for obs in heldout]))
+    baseline_l2 = mean_rollout_error(sim, heldout, attached)
     timings["baseline_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

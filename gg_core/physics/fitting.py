@@ -331,6 +331,11 @@ def rollout_error(sim: ImplicitSimulator, obs: Observed, pinned: np.ndarray) -> 
     return rollout_distance(free_rollout(sim, obs), obs, pinned)
 
 
+def mean_rollout_error(sim: ImplicitSimulator, sequences: list[Observed], pinned: np.ndarray) -> float:
+    """rollout_error averaged over `sequences` (a set of training or held-out recordings)."""
+    return float(np.mean([rollout_error(sim, obs, pinned) for obs in sequences]))
+
+
 @dataclass
 class FitConfig:
     global_iterations: int = 20     # L-BFGS iterations (each may evaluate the loss more than once)
