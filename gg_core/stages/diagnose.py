@@ -18,7 +18,8 @@ it through the force library, refit, and show the held-out rollout error before 
    `max_trials`, are each added to the simulator and refitted; one is confirmed only if the held-out rollout
    error drops by at least `min_gain` (and `min_gain_mm`) and the training sequences' free rollouts improve
    too, each against the better of the baseline fit and its refit without candidates (pipeline.judge_reference);
-   of the confirmed, the one rolling out the training sequences best is accepted (pipeline.ranked).
+   of the confirmed, the one whose smaller gain (training or held-out rollouts) is largest is accepted
+   (pipeline.ranked).
 
 Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply) or, for synthetic captures, the ground-truth meshes,
 optionally with spatially correlated noise (motion.py: `--source`, auto by default). truth.json is read only for
