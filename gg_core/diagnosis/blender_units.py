@@ -30,5 +30,6 @@ def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
     if effect == "shrink":
         return {"region.rest_scale": 1.0 - float(params["factor"])}
     if effect == "stiff_patch":
-        return {"region.stretch_scale": float(params["factor"])}               # Blender springs vs StVK: approx.
+        factor = float(params["factor"])                                     # Blender springs vs StVK: approx.
+        return {"region.stretch_scale": factor, "region.bending_scale": factor}
     return {}

@@ -17,7 +17,8 @@ from diagnosis_helpers import write_blender_layout_capture, write_sim_capture  #
 
 from gg_core.cli import main  # noqa: E402
 from gg_core.commands.bench_diagnose import (capture_of, case_name, confusion, effect_params,  # noqa: E402
-                                             parameter_error, region_overlap, summarize, truth_parameters)
+                                             parameter_error, parameter_errors, region_overlap, summarize,
+                                             truth_parameters)
 
 
 def test_the_command_line_defaults_are_the_requests_and_parsing_imports_no_torch(tmp_path):
@@ -89,6 +90,11 @@ def test_bench_scoring():
     friction = truth_parameters({"effect": {"name": "friction", "params": {"friction": 60.0}}})
     assert friction == {"body_friction.mu": pytest.approx(0.6)}
     assert parameter_error(friction, {"body_friction.mu": 0.3}) == pytest.approx(0.5)
+    patch = truth_parameters({"effect": {"name": "stiff_patch", "params": {"factor": 30.0}}})
+    refit = {"region.stretch_scale": 0.16, "region.bending_scale": 23.9}     # our simulator's patch, seed 2
+    assert parameter_errors(patch, refit) == {"region.stretch_scale": pytest.approx(29.84 / 29),
+                                              "region.bending_scale": pytest.approx(6.1 / 29)}
+    assert parameter_error(patch, refit) == pytest.approx(29.84 / 29)   # both scales must be right
     cases = [{"true_class": "none", "predicted": "none", "correct": True, "heldout_gain": 0.0, "gap_closed": None,
               "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": None,
               "resolved_by_reference": False},
