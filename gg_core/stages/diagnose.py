@@ -156,7 +156,15 @@ def rest_state(req: DiagnoseRequest, first_frame: np.ndarray, mesh_log: dict) ->
     template's angles, and 4.5 mm with the first frame's lengths bending towards flat (the template's mean |angle|
     is 0.07 rad, the first frame's 0.21, correlation 0.28). Rest lengths from the frames add little: the per-edge
     median over the training frames 3.9 mm, lower percentiles worse (p20 5.0, p5 5.5 mm). The baseline fit bending
-    towards flat: 7.2 -> 4.5 mm held-out there (one margin start), 9.4 -> 8.6 mm on Blender's skirt."""
+    towards flat: 7.2 -> 4.5 mm held-out there (one margin start), 9.4 -> 8.6 mm on Blender's skirt.
+
+    Measured and not kept (session 23, /work/data/s23/statics_probe.py): rest lengths from inverse statics of the
+    first frame, i.e. the per-edge lengths for which stretching balances gravity and bending (towards flat) at
+    the free vertices more than 2 cm from the body, least squares with a small log-length prior. With the true
+    material the held-out rollout went 4.5 -> 3.5 mm (walk 4.3 -> 3.9, torso twist 4.9 -> 4.9 mm; the template's
+    lengths: 0.2-0.9 mm), the solved lengths correlate 0.33 with the template's (log-ratio sd 0.17 % against the
+    truth's 0.51 %): one loaded frame does not determine them (about as many balance equations as edges, and the
+    frame is not at rest: with the true rest state its force residual is 0.15 of the vertex weights rms)."""
     if not req.rest_mesh:
         return first_frame
     if mesh_log["remeshed"]:
