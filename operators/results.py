@@ -227,13 +227,16 @@ def region_groups(report: dict) -> dict[str, list[int]]:
 
 
 def summary(report: dict) -> str:
-    """One line for the panel: the verdict and the accepted effects with their held-out gain."""
+    """One line for the panel: the verdict, the accepted effects and how much they lower the held-out rollout
+    error (each alone, or together where two were accepted: the joint refit is what was confirmed)."""
     if report.get("verdict") != "missing":
         return "Nothing missing: the simulator explains the recordings"
+    accepted = report.get("accepted", [])
+    if len(accepted) > 1 and report.get("heldout_gain") is not None:
+        return f"Missing physics: {' + '.join(accepted)} (held-out error {-report['heldout_gain']:+.0%} together)"
     gains = {e["name"]: e.get("heldout_gain") for e in report.get("effects", [])}
-    accepted = ", ".join(f"{name} ({gains[name]:+.0%} held-out)" if gains.get(name) is not None else name
-                         for name in report.get("accepted", []))
-    return f"Missing physics: {accepted}"
+    return "Missing physics: " + ", ".join(f"{name} (held-out error {-gains[name]:+.0%})"
+                                           if gains.get(name) is not None else name for name in accepted)
 
 
 def _attribute_material(attribute: str) -> bpy.types.Material:

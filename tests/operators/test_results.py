@@ -118,7 +118,12 @@ def test_residual_map_colours_the_garment_and_states_the_verdict(blender, tmp_pa
     obj.data.color_attributes["residual"].data.foreach_get("color", colors)
     colors = colors.reshape(4, 4)
     assert not np.allclose(colors[0], colors[3])  # low and high residual differ
-    assert blender.context.scene.gg.diagnosis == "Missing physics: air_drag (+42% held-out)"
+    assert blender.context.scene.gg.diagnosis == "Missing physics: air_drag (held-out error -42%)"
+    report.update(accepted=["wind", "gravity_offset"], heldout_gain=0.25)       # a joint refit was confirmed
+    _write_diagnosis(tmp_path / "joint", report, np.array([0.0, 1.0, 2.0, 4.0]))
+    blender.context.scene.gg.project_path = str(tmp_path / "joint")
+    assert blender.ops.gg.show_residuals() == {"FINISHED"}
+    assert blender.context.scene.gg.diagnosis == "Missing physics: wind + gravity_offset (held-out error -25% together)"
 
 
 def test_activity_map_is_a_second_attribute_with_the_residual_still_shown(blender, tmp_path):
