@@ -36,7 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..diagnosis.blender_units import truth_parameters
+from ..diagnosis.blender_units import tilt, truth_parameters
+from ..synth.effects import GRAVITY
 
 HELP = "missing-physics diagnosis on synthetic captures with hidden effects: confusion table, errors, gains"
 
@@ -133,13 +134,14 @@ def parameter_errors(truth: dict[str, object], values: dict[str, object] | None)
     """Relative error of every comparable parameter (vector norm for vectors; for scale factors, of the change
     from 1); empty where nothing was refitted."""
     out: dict[str, float] = {}
+    values = dict(values or {})
+    if "gravity_offset.delta_g" in values:           # our gravity is -9.81 y plus the offset
+        values["gravity.tilt"] = tilt(np.asarray(values["gravity_offset.delta_g"]) + (0.0, -GRAVITY, 0.0))
     for key, true in truth.items():
-        if not values or key not in values:
+        if key not in values:
             continue
         ours = np.asarray(values[key], np.float64)
         true_v = np.asarray(true, np.float64)
-        if key == "gravity_offset.delta_g":
-            ours = ours[[0, 2]]
         if key.startswith("region."):
             ours, true_v = ours - 1.0, true_v - 1.0
         out[key] = float(np.linalg.norm(ours - true_v) / max(np.linalg.norm(true_v), 1e-12))
@@ -200,8 +202,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
                     None)
     ref = report["reference_trials"].get(reference[0]) if reference else None
     before, after = report["heldout_l2_before"], report["heldout_l2_after"]
-    # what the captures of our own simulator stored at generation wins (its friction adds to our default mu)
-    true_params = {**truth_parameters(truth), **truth.get("true_parameters", {})}
+    true_params = truth_parameters(truth)
     gap = None if ref is None else before - ref["heldout_l2"]
     named_refit = accepted["refit"] if accepted and predicted == true_class else None
     return {

@@ -78,8 +78,14 @@ def test_bench_scoring():
     truth = {"effect": {"name": "gravity", "params": {"scale": 1.25, "tilt_deg": 12.0}},
              "material": {"gravity": [2.55, -12.0, 0.0]}}
     params = truth_parameters(truth)
-    assert params == {"gravity_offset.delta_g": [2.55, 0.0]}
-    assert parameter_error(params, {"gravity_offset.delta_g": [2.04, 0.3, 0.0]}) == pytest.approx(0.2)
+    assert params == {"gravity.tilt": [pytest.approx(2.55 / 12.0), 0.0]}
+    # our vertical gravity stays 9.81: the same tilt is a smaller offset (the offset's y is the free scale's)
+    same_tilt = [9.81 * 2.55 / 12.0, 0.0, 0.0]
+    assert parameter_error(params, {"gravity_offset.delta_g": same_tilt}) == pytest.approx(0.0, abs=1e-12)
+    assert parameter_error(params, {"gravity_offset.delta_g": [0.8 * same_tilt[0], 0.0, 0.0]}) == pytest.approx(0.2)
+    resimulated = {"effect": {"name": "gravity", "params": {}, "blender": {"gravity": [2.55, -12.0, 0.0]}},
+                   "material": {"gravity": [0.0, -9.81, 0.0]}}             # the reference's material, recorded
+    assert truth_parameters(resimulated) == params
     shrink = truth_parameters({"effect": {"name": "shrink", "params": {"factor": 0.15}}})
     assert parameter_error(shrink, {"region.rest_scale": 0.88}) == pytest.approx(0.2)
     assert parameter_error(shrink, None) is None
@@ -90,6 +96,9 @@ def test_bench_scoring():
     friction = truth_parameters({"effect": {"name": "friction", "params": {"friction": 60.0}}})
     assert friction == {"body_friction.mu": pytest.approx(0.6)}
     assert parameter_error(friction, {"body_friction.mu": 0.3}) == pytest.approx(0.5)
+    ours = truth_parameters({"effect": {"name": "friction", "params": {"friction": 60.0},
+                                        "ours": {"terms": {"body_friction": {"mu": 1.05}}}}})
+    assert ours == {"body_friction.mu": 1.05}                             # our simulator's own coefficient
     patch = truth_parameters({"effect": {"name": "stiff_patch", "params": {"factor": 30.0}}})
     refit = {"region.stretch_scale": 0.16, "region.bending_scale": 23.9}     # our simulator's patch, seed 2
     assert parameter_errors(patch, refit) == {"region.stretch_scale": pytest.approx(29.84 / 29),
