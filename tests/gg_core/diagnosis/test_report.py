@@ -36,6 +36,7 @@ def test_sentence_and_page(tmp_path):
     text = sentence(EFFECT, 0.012)
     assert "12.0 mm to 6.0 mm" in text and "+50% gain" in text and "gravity_offset.delta_g = (2.1, 0, 0.1)" in text
     assert "material" not in text
+    assert "gravity tilted 12.1 deg from the vertical, towards azimuth 3 deg" in text   # atan(2.1 / 9.81)
     v, f = sheet(4, 4, 0.5, 0.5)
     report = {"verdict": "missing", "accepted": ["gravity_offset"], "effects": [EFFECT],
               "heldout_l2_before": 0.012, "heldout_l2_after": 0.006, "outputs": {},
