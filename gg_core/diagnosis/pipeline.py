@@ -363,13 +363,13 @@ def ranked(passing: list[str], trials: dict[str, Trial], null: Trial) -> list[st
 
     Why not the training rollouts alone (sessions 21-22): a slow wrong term can roll the two training sequences
     out better while helping the held-out one less. Measured over the 14 session-22 diagnoses at noise 0
-    (/work/data/s22/rank23.py): by training 12 right, by the smaller gain 13 (the sum of both gains, or held-out
-    alone: 13); Blender's hidden wind (seed 2) had gravity at -20 % training / -11 % held-out and wind at -14 % /
-    -17 %. Over 60 older stored diagnoses (sessions 18-21) the smaller gain chose as the training gain did (39
-    right either way; held-out alone 37: it twice chose worse (own simulator's air damping seed 1: wind -3 % training / -16 % held-out
-    against mass damping -32 % / -13 %; its gravity tilt: wind -9 % / -18 % against the tilt -24 % / -13 %)).
-    The held-out sequence is the confirmation test, so the accepted gain is the better of the confirmed ones by
-    this rule: only confirmed terms are ranked, and each of them already beat the threshold there."""
+    (/work/data/s23/rank23.py): by training 12 right, by the smaller gain 13 (the sum of both gains, or held-out
+    alone: 13 too); Blender's hidden wind (seed 2) had gravity at -20 % training / -11 % held-out and wind at
+    -14 % / -17 %. Over 60 older stored diagnoses (sessions 18-21) the smaller gain chose as the training gain did
+    (39 right either way), held-out alone twice worse (37): our simulator's hidden air damping, seed 1, wind -3 %
+    training / -16 % held-out against mass damping -32 % / -13 %; its gravity tilt, wind -9 % / -18 % against
+    the tilt -24 % / -13 %. The held-out sequence is the confirmation test, so the accepted gain is the better of
+    the confirmed ones by this rule: only confirmed terms are ranked, each already past the threshold there."""
     def smaller_gain(n: str) -> float:
         t = trials[n]
         return min(1.0 - t.train_l2 / null.train_l2, 1.0 - t.heldout_l2 / null.heldout_l2)
