@@ -36,8 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..diagnosis.blender_units import tilt, truth_parameters
-from ..synth.effects import GRAVITY
+from ..diagnosis.blender_units import offset_tilt, truth_parameters
 
 HELP = "missing-physics diagnosis on synthetic captures with hidden effects: confusion table, errors, gains"
 
@@ -135,8 +134,8 @@ def parameter_errors(truth: dict[str, object], values: dict[str, object] | None)
     from 1); empty where nothing was refitted."""
     out: dict[str, float] = {}
     values = dict(values or {})
-    if "gravity_offset.delta_g" in values:           # our gravity is -9.81 y plus the offset
-        values["gravity.tilt"] = tilt(np.asarray(values["gravity_offset.delta_g"]) + (0.0, -GRAVITY, 0.0))
+    if "gravity_offset.delta_g" in values:
+        values["gravity.tilt"] = offset_tilt(values["gravity_offset.delta_g"])
     for key, true in truth.items():
         if key not in values:
             continue

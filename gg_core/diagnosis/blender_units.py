@@ -1,9 +1,12 @@
 """What a hidden effect of `gg synth` (Blender settings, gg_core/synth/effects.py) means in our simulator's
 parameters: the benchmark scores refitted parameters against it, and the own-simulator captures
-(resimulated.py) use it to set their hidden terms. Numpy only: the command line imports it at start-up."""
+(resimulated.py) use it to set their hidden terms. Numpy and synth.effects only: the command line imports it at
+start-up."""
 from __future__ import annotations
 
 import numpy as np
+
+from ..synth.effects import GRAVITY
 
 
 def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
@@ -48,3 +51,8 @@ def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
 def tilt(gravity: np.ndarray) -> list[float]:
     """[x, z] tangent of the angle of a gravity vector (+Y up) from the vertical."""
     return [float(gravity[0] / abs(gravity[1])), float(gravity[2] / abs(gravity[1]))]
+
+
+def offset_tilt(offset: object) -> list[float]:
+    """tilt of our simulator's gravity with the gravity_offset term's `delta_g` (m/s^2, added to 9.81 down)."""
+    return tilt(np.asarray(offset, np.float64) + (0.0, -GRAVITY, 0.0))

@@ -12,7 +12,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from ..storage import atomic_path
-from ..synth.effects import GRAVITY
+from .blender_units import offset_tilt
 
 # black-body ramp: dark purple -> red -> orange -> pale yellow (low -> high residual)
 _RAMP = np.array([[40, 20, 70], [150, 30, 70], [230, 90, 40], [250, 190, 60], [255, 250, 200]], np.float64)
@@ -103,7 +103,7 @@ def sentence(effect: dict, before: float) -> str:
     values = effect["refit"] or {}
     params = ", ".join(f"{k} = {_fmt(v)}" for k, v in values.items() if not k.startswith("material."))
     if "gravity_offset.delta_g" in values:
-        params += f" ({tilt_phrase(np.asarray(values['gravity_offset.delta_g'], np.float64))})"
+        params += f" ({tilt_phrase(values['gravity_offset.delta_g'])})"
     return (f"Missing {effect['name'].replace('_', ' ')} ({effect['class'].replace('_', ' ')}): "
             f"{effect['description']}; refitted {params}. The residual it explains is largest where "
             f"{effect['evidence']['where'].replace('_', ' ')} is high and in frames with high "
@@ -111,12 +111,12 @@ def sentence(effect: dict, before: float) -> str:
             f"{before * 1e3:.1f} mm to {effect['heldout_l2'] * 1e3:.1f} mm ({effect['heldout_gain']:+.0%} gain).")
 
 
-def tilt_phrase(offset: np.ndarray) -> str:
-    """Gravity with offset `offset` (m/s^2, added to 9.81 down) as a tilt: what the data can tell (its size is
-    the material's free scale, blender_units.truth_parameters)."""
-    g = offset + (0.0, -GRAVITY, 0.0)
-    angle = np.degrees(np.arctan2(np.hypot(g[0], g[2]), -g[1]))
-    azimuth = np.degrees(np.arctan2(g[2], g[0]))
+def tilt_phrase(offset: object) -> str:
+    """Gravity with the offset `offset` as a tilt: what the data can tell (its size is the material's free scale,
+    blender_units.truth_parameters)."""
+    x, z = offset_tilt(offset)
+    angle = np.degrees(np.arctan(np.hypot(x, z)))
+    azimuth = np.degrees(np.arctan2(z, x))
     return f"gravity tilted {angle:.1f} deg from the vertical, towards azimuth {azimuth:.0f} deg from +x to +z"
 
 
