@@ -228,15 +228,23 @@ def region_groups(report: dict) -> dict[str, list[int]]:
 
 def summary(report: dict) -> str:
     """One line for the panel: the verdict, the accepted effects and how much they lower the held-out rollout
-    error (each alone, or together where two were accepted: the joint refit is what was confirmed)."""
+    error (each alone, as the mean over the folds where it was cross-validated, or together where two were
+    accepted: the joint refit is what was confirmed)."""
     if report.get("verdict") != "missing":
         return "Nothing missing: the simulator explains the recordings"
     accepted = report.get("accepted", [])
     if len(accepted) > 1 and report.get("heldout_gain") is not None:
         return f"Missing physics: {' + '.join(accepted)} (held-out error {-report['heldout_gain']:+.0%} together)"
-    gains = {e["name"]: e.get("heldout_gain") for e in report.get("effects", [])}
-    return "Missing physics: " + ", ".join(f"{name} (held-out error {-gains[name]:+.0%})"
-                                           if gains.get(name) is not None else name for name in accepted)
+    effects = {e["name"]: e for e in report.get("effects", [])}
+
+    def gain(name: str) -> str:
+        effect = effects.get(name, {})
+        cv = effect.get("cross_validated") or {}
+        if cv.get("complete"):
+            return f"{name} (held-out error {-cv['heldout_gain']:+.0%}, mean of {cv['folds']} folds)"
+        return name if effect.get("heldout_gain") is None else f"{name} (held-out error {-effect['heldout_gain']:+.0%})"
+
+    return "Missing physics: " + ", ".join(gain(name) for name in accepted)
 
 
 def _attribute_material(attribute: str) -> bpy.types.Material:

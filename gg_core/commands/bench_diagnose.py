@@ -212,6 +212,8 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         "proposed": report["selection"]["order"],
         "implausible": [e["name"] for e in report["effects"] if e.get("implausible")],
         "heldout_l2_before": before, "heldout_l2_after": after, "heldout_gain": 1.0 - after / before,
+        "cross_validated_gain": None if accepted is None or not accepted.get("cross_validated")
+        else accepted["cross_validated"]["heldout_gain"],
         "true_effect_l2": None if ref is None else ref["heldout_l2"],
         "gap_closed": None if gap is None or gap <= 0 else (before - after) / gap,
         "true_parameters": true_params,
@@ -231,6 +233,7 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
     none = [c for c in cases if c["true_class"] == "none"]
     errors = [c["parameter_error"] for c in present if c["parameter_error"] is not None]
     gains = [c["heldout_gain"] for c in present if c["correct"]]
+    cv_gains = [c["cross_validated_gain"] for c in present if c["correct"] and c["cross_validated_gain"] is not None]
     closed = [c["gap_closed"] for c in present if c["gap_closed"] is not None]
 
     def mean(xs: list[float]) -> float | None:
@@ -253,6 +256,7 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
             "false_alarm_rate_none": mean([float(not c["correct"]) for c in none]),
             "median_parameter_error": float(np.median(errors)) if errors else None,
             "mean_heldout_gain_when_named": mean(gains),
+            "mean_cross_validated_gain_when_named": mean(cv_gains),
             "median_gap_closed": float(np.median(closed)) if closed else None}
 
 
@@ -277,6 +281,8 @@ def run(args: argparse.Namespace) -> int:
                     print(f"{case['capture']} noise {noise:g} mm: named {case['predicted']} "
                           f"({'right' if case['correct'] else 'WRONG'}), held-out "
                           f"{case['heldout_l2_before'] * 1e3:.1f} -> {case['heldout_l2_after'] * 1e3:.1f} mm"
+                          + ("" if case["cross_validated_gain"] is None else
+                             f" ({-case['cross_validated_gain']:+.0%} over the folds)")
                           + ("" if case["true_effect_l2"] is None else
                              f", true effect {case['true_effect_l2'] * 1e3:.1f} mm")
                           + f"; motion change {case['signal_mm']:.1f} mm, {case['step_change_mm']:.1f} mm "

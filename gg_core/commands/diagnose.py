@@ -42,6 +42,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
                         help="relative held-out rollout improvement an effect needs to be accepted")
     parser.add_argument("--min-gain-mm", type=float, default=0.25,     # DiagnoseRequest's (the stage imports torch)
                         help="absolute held-out rollout improvement (mm) an effect needs as well")
+    parser.add_argument("--fold-finalists", type=int, default=3,
+                        help="candidates refitted again with each training sequence held out in turn; an effect is "
+                             "confirmed on the mean held-out gain over these folds (0: on the given split alone)")
     parser.add_argument("--bootstrap", type=int, default=100, help="block-bootstrap replicates")
     parser.add_argument("--fps", type=float, default=30.0, help="frame rate of the sequences")
     parser.add_argument("--substeps", type=int, default=2, help="implicit steps per frame (fits and rollouts)")
@@ -62,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
                           fps=args.fps, substeps=args.substeps, seed=args.seed,
                           baseline_iterations=args.baseline_iterations, refit_iterations=args.refit_iterations,
                           max_samples=args.max_samples, fit_horizon=args.fit_horizon, min_gain=args.min_gain,
-                          min_gain_mm=args.min_gain_mm, bootstrap=args.bootstrap, workers=args.workers,
+                          min_gain_mm=args.min_gain_mm, fold_finalists=args.fold_finalists,
+                          bootstrap=args.bootstrap, workers=args.workers,
                           progress=args.progress)
     report = run_diagnose(req)
     if args.progress != "jsonl":

@@ -19,6 +19,7 @@ from ..physics.simulator import ImplicitSimulator
 from ..physics.solver import SolverOptions
 from .confirm import Trial, trial
 from .features import FEATURES, state_features
+from .folds import CrossValidation, Fold, extra_splits, finalists
 from .library import BY_NAME, CANDIDATES, Candidate, Context
 from .localize import Localization, activity_map, localize
 from .residuals import FrameBatch, Pooling, build_frames, make_pooling, nuisance_changes, residual, responses
@@ -62,6 +63,7 @@ class Result:
     batch: FrameBatch
     unphysical: dict[str, str]         # trial name -> why its refitted values are not cloth (never accepted)
     progress: Progress
+    cv: CrossValidation                # the folds: the user's split, then each training sequence held out
     reference: dict[str, Trial] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     scans: dict[str, ScanResult] = field(default_factory=dict)   # region candidates that found their own region
@@ -96,6 +98,15 @@ class Result:
                                           "residual": loc.step_curve[idx].tolist()}
         return out
 
+    def cross_validated(self, name: str) -> dict | None:
+        """The candidate's mean gains over the folds that trialled it (folds.py), where there was more than one."""
+        n_folds = len(self.cv.per_fold(name)) if name in self.cv.folds[0].trials else 0
+        if n_folds < 2:
+            return None
+        held, train = self.cv.mean_gains(name)
+        return {"heldout_gain": held, "train_rollout_gain": train, "folds": n_folds,
+                "complete": self.cv.complete(name)}
+
     def effects(self) -> list[dict]:
         sel = self.selection
         order = {n: i for i, n in enumerate(sel.order)}
@@ -119,6 +130,7 @@ class Result:
                 "heldout_l2": None if t is None else t.heldout_l2,
                 "heldout_gain": None if t is None else self.gain(t),
                 "train_rollout_gain": None if t is None else self.train_gain(t),
+                "cross_validated": self.cross_validated(n),
                 "implausible": self.unphysical.get(n),
             })
         return out
@@ -154,6 +166,7 @@ class Result:
             "null_refit": {"heldout_l2": self.null_refit.heldout_l2, "train_rollout_l2": self.null_refit.train_l2},
             "reference_trials": {n: self.trial_summary(t) for n, t in self.reference.items()},
             "joint_trials": {n: self.trial_summary(t) for n, t in self.trials.items() if len(t.names) > 1},
+            "cross_validation": self.cv.to_json(),
             "withheld_candidates": self.withheld,
         }
 
@@ -172,7 +185,7 @@ def fit_config(req: DiagnoseRequest, iterations: int) -> FitConfig:
 
 
 def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, body_faces: np.ndarray,
-              attached: np.ndarray, hands: np.ndarray | None, rest: np.ndarray, progress: Progress
+              attached: np.ndarray, hands: np.ndarray | None, rest: np.ndarray, step: Step
               ) -> tuple[ImplicitSimulator, BehaviorParams, dict[str, float], list[np.ndarray], float]:
     """The global-parameter fit from each of MARGIN_STARTS, kept by the training sequences' free-rollout error;
     also returns the kept fit's free rollouts of the training sequences (the activity map compares them) and
@@ -206,7 +219,7 @@ def _baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray, bo
         starts[f"margin_start_{scale:g}x_train_rollout_l2"] = error
         if best is None or error < best[2]:
             best = (sim, params, error, rollouts)
-    progress.step("baseline fitted (global parameters only)")
+    step("baseline fitted (global parameters only)")
     return best[0], best[1], starts, best[3], best[2]
 
 
@@ -220,34 +233,26 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     candidates, withheld = usable_candidates(bool(req.rest_mesh))
     t0 = time.perf_counter()
     sim, params, starts, train_rollouts, baseline_train_l2 = _baseline(req, train, faces, body_faces, attached,
-                                                                       hands, rest, progress)
+                                                                       hands, rest, progress.step)
     baseline_l2 = mean_rollout_error(sim, heldout, attached)
     timings["baseline_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    batch = build_frames(sim, train)
-    res = residual(sim, batch)
-    predicted = batch.x_next - res
-    labels, changes = nuisance_changes(sim, params)
-    nuisance = responses(sim, batch, predicted, changes)
-    pooling = make_pooling(sim, batch, seed=req.seed)
-    y, n_cols = pooling.rows(res), pooling.rows(nuisance).T
-    adjust, *_ = np.linalg.lstsq(n_cols, y, rcond=None)
-    adjusted = res - np.einsum("k,knvc->nvc", adjust, nuisance)
+    r = _measure(sim, params, train, req.seed)
     activity = activity_map([obs.garment[1:] for obs in train], train_rollouts, sim.num.edges, sim.num.free > 0)
-    loc = localize(sim, pooling, adjusted, state_features(sim, batch, pooling), activity)
+    loc = localize(sim, r.pooling, r.adjusted, state_features(sim, r.batch, r.pooling), activity)
     progress.step("residual measured and localized")
     timings["residual_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    ctx = Context.build(sim, batch, loc.region, predicted)
-    scans = {c.name: scan_region(c, ctx, pooling, predicted, y, n_cols, req.probe_acceleration)
+    ctx = Context.build(sim, r.batch, loc.region, r.predicted)
+    scans = {c.name: scan_region(c, ctx, r.pooling, r.predicted, r.y, r.nuisance_cols, req.probe_acceleration)
              for c in candidates if c.region_from == "scan"}
     contexts = {c.name: replace(ctx, region=scans[c.name].region) if c.name in scans else ctx for c in candidates}
     progress.step("region scan")
-    blocks = _candidate_rows(contexts, pooling, predicted, req.probe_acceleration)
+    blocks = _candidate_rows(contexts, r.pooling, r.predicted, req.probe_acceleration)
     progress.step("candidate responses")
-    design = Design(y, n_cols, blocks, pooling.groups())
+    design = Design(r.y, r.nuisance_cols, blocks, r.pooling.groups())
     sel = select(design, BY_NAME, req.min_explained, req.bootstrap, req.seed)
     progress.step("selection with block bootstrap")
     timings["selection_s"] = time.perf_counter() - t0
@@ -264,8 +269,29 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     before = null.heldout_l2
     trials = dict(zip(proposed, refits))
     unphysical = {n: why for n in proposed if (why := implausible(trials[n], sim.cloth))}
-    passing = ranked([n for n in proposed if confirmed(trials[n], null, req.min_gain, req.min_gain_mm)
-                      and n not in unphysical], trials, null)
+    first = Fold([o.name for o in train], [o.name for o in heldout], null,
+                 {n: t for n, t in trials.items() if n not in unphysical})
+    timings["trials_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    final = finalists(list(first.trials), first, req.min_gain, req.fold_finalists)
+    folds = [first]
+    if final:
+        fold_jobs = [_FoldJob(req, [o for o in train + heldout if o.name in fit_on],
+                              [o for o in train + heldout if o.name in held], faces, body_faces, attached, hands, rest,
+                              final, {n: contexts[n].region for n in final})
+                     for fit_on, held in extra_splits(first.train, first.heldout)]
+        folds += run_jobs(_run_fold, fold_jobs, worker_count(req.workers, len(fold_jobs)), progress)
+    for fold in folds[1:]:
+        for n, t in fold.trials.items():
+            if n not in unphysical and (why := implausible(t, sim.cloth)):
+                unphysical[n] = f"{why} (refitted without {', '.join(fold.heldout)})"
+    cv = CrossValidation(folds)
+    passing = cv.ranked([n for n in first.trials if cv.confirmed(n, req.min_gain, req.min_gain_mm)
+                         and n not in unphysical])
+    timings["folds_s"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
     accepted, after = passing[:1], (trials[passing[0]].heldout_l2 if passing else before)
     pair_regions = [contexts[n].region for n in passing[:2] if BY_NAME[n].needs_region]
     one_region = len(pair_regions) < 2 or np.array_equal(*pair_regions)   # one trial holds one region
@@ -280,13 +306,12 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
             unphysical[joint_name] = why
         elif confirmed(joint, trials[passing[0]], req.min_gain, req.min_gain_mm):
             accepted, after = passing[:2], joint.heldout_l2
-    timings["trials_s"] = time.perf_counter() - t0
+    timings["joint_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     reference = {}
     for n in req.reference:
-        reference[n] = _reference_trial(BY_NAME[n], sim, batch, pooling, design, predicted, reference_region, req,
-                                        train, heldout, attached)
+        reference[n] = _reference_trial(BY_NAME[n], sim, r, reference_region, req, train, heldout, attached)
         progress.step(f"reference trial {n}: held-out L2 {reference[n].heldout_l2 * 1e3:.1f} mm")
     timings["reference_s"] = time.perf_counter() - t0
     baseline = {k: v for k, v in params.global_values().items()}
@@ -294,8 +319,9 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     baseline["heldout_l2_global_fit"] = baseline_l2
     baseline["internal_damping_loss_factor"] = 2.0 * np.pi * baseline["viscoelastic_damping.tau"]   # at 1 Hz
     baseline.update(starts)
-    return Result(loc, sel, trials, accepted, null, null_refit, after, baseline, dict(zip(labels, adjust.tolist())),
-                  batch, unphysical, progress, reference, timings, scans, withheld)
+    return Result(loc, sel, trials, accepted, null, null_refit, after, baseline,
+                  dict(zip(r.labels, r.adjust.tolist())), r.batch, unphysical, progress, cv, reference, timings, scans,
+                  withheld)
 
 
 def usable_candidates(rest_given: bool) -> tuple[list[Candidate], dict[str, str]]:
@@ -355,26 +381,6 @@ def implausible(t: Trial, cloth: Cloth) -> str | None:
 def selected(sel: Selection, min_inclusion: float) -> list[str]:
     """The candidates the forward selection chose with bootstrap inclusion >= `min_inclusion`."""
     return [n for n in sel.order if sel.inclusion[n] >= min_inclusion]
-
-
-def ranked(passing: list[str], trials: dict[str, Trial], null: Trial) -> list[str]:
-    """Confirmed candidates in the order they are accepted: by the smaller of their refit's gains over `null` on
-    the training rollouts and on the held-out ones (then by held-out error), so a term must help every recording.
-
-    Why not the training rollouts alone (sessions 21-22): a slow wrong term can roll the two training sequences
-    out better while helping the held-out one less. Measured over the 14 session-22 diagnoses at noise 0
-    (/work/data/s23/rank23.py): by training 12 right, by the smaller gain 13 (the sum of both gains, or held-out
-    alone: 13 too); Blender's hidden wind (seed 2) had gravity at -20 % training / -11 % held-out and wind at
-    -14 % / -17 %. Over 60 older stored diagnoses (sessions 18-21) the smaller gain chose as the training gain did
-    (39 right either way), held-out alone twice worse (37): our simulator's hidden air damping, seed 1, wind -3 %
-    training / -16 % held-out against mass damping -32 % / -13 %; its gravity tilt, wind -9 % / -18 % against
-    the tilt -24 % / -13 %. The held-out sequence is the confirmation test, so the accepted gain is the better of
-    the confirmed ones by this rule: only confirmed terms are ranked, each already past the threshold there."""
-    def smaller_gain(n: str) -> float:
-        t = trials[n]
-        return min(1.0 - t.train_l2 / null.train_l2, 1.0 - t.heldout_l2 / null.heldout_l2)
-
-    return sorted(passing, key=lambda n: (-smaller_gain(n), trials[n].heldout_l2))
 
 
 def propose(sel: Selection, min_inclusion: float, max_trials: int) -> list[str]:
@@ -470,19 +476,91 @@ def _candidate_rows(contexts: dict[str, Context], pooling: Pooling, predicted: n
     return blocks
 
 
-def _reference_trial(cand: Candidate, sim: ImplicitSimulator, batch: FrameBatch, pooling: Pooling, design: Design,
-                     predicted: np.ndarray, region: np.ndarray | None, req: DiagnoseRequest, train: list[Observed],
-                     heldout: list[Observed], attached: np.ndarray) -> Trial:
+def _reference_trial(cand: Candidate, sim: ImplicitSimulator, r: Measured, region: np.ndarray | None,
+                     req: DiagnoseRequest, train: list[Observed], heldout: list[Observed], attached: np.ndarray
+                     ) -> Trial:
     """A trial of `cand` whatever the selection said, on the given region (benchmarks: the true effect, on the
     true region), started from its regression coefficients on that region (its probe sizes where those are 0 or
     the probe's step failed)."""
-    ctx = Context.build(sim, batch, region if cand.needs_region else None, predicted)
-    probes = cand.probes(ctx, req.probe_acceleration)
-    rows = pooling.rows(responses(sim, batch, predicted, probes)).T
-    coefs = np.array([size for size, _ in probes])
-    if np.isfinite(rows).all():
-        fitted = fit(gram(Design(design.y, design.nuisance, {cand.name: rows}, design.groups)), [cand.name],
-                     BY_NAME).coefs[cand.name]
-        coefs = np.where(fitted != 0, fitted, coefs)
-    return trial(sim, BASELINE_FIT, [(cand, coefs)], ctx, ctx.region, train, heldout, attached,
-                 fit_config(req, req.refit_iterations))
+    ctx = Context.build(sim, r.batch, region if cand.needs_region else None, r.predicted)
+    sizes = np.array([size for size, _ in cand.probes(ctx, req.probe_acceleration)])
+    coefs = _regressed(cand, ctx, r, req.probe_acceleration)
+    return trial(sim, BASELINE_FIT, [(cand, np.where(coefs != 0, coefs, sizes))], ctx, ctx.region, train, heldout,
+                 attached, fit_config(req, req.refit_iterations))
+
+
+@dataclass
+class Measured:
+    """The residual of a fitted simulator on training sequences, pooled, with the nuisance columns it is regressed
+    beside and the residual left after them."""
+
+    batch: FrameBatch
+    predicted: np.ndarray        # [N,V,3] the simulator's one-frame predictions
+    pooling: Pooling
+    y: np.ndarray                # pooled residual rows
+    nuisance_cols: np.ndarray    # [R,K] pooled responses to the nuisance changes (residuals.nuisance_changes)
+    labels: list[str]            # the nuisance changes
+    adjust: np.ndarray           # [K] their least-squares sizes
+    adjusted: np.ndarray         # [N,V,3] the residual after them
+
+
+def _measure(sim: ImplicitSimulator, params: BehaviorParams, train: list[Observed], seed: int) -> Measured:
+    batch = build_frames(sim, train)
+    res = residual(sim, batch)
+    predicted = batch.x_next - res
+    labels, changes = nuisance_changes(sim, params)
+    nuisance = responses(sim, batch, predicted, changes)
+    pooling = make_pooling(sim, batch, seed=seed)
+    y, n_cols = pooling.rows(res), pooling.rows(nuisance).T
+    adjust, *_ = np.linalg.lstsq(n_cols, y, rcond=None)
+    return Measured(batch, predicted, pooling, y, n_cols, labels, adjust,
+                    res - np.einsum("k,knvc->nvc", adjust, nuisance))
+
+
+def _regressed(cand: Candidate, ctx: Context, r: Measured, acceleration: float) -> np.ndarray:
+    """`cand`'s coefficients regressed alone on the residual beside the nuisance columns (as Selection.alone);
+    zero where the regression puts nothing or the probe's step failed."""
+    probes = cand.probes(ctx, acceleration)
+    rows = r.pooling.rows(responses(ctx.sim, ctx.batch, r.predicted, probes)).T
+    if not np.isfinite(rows).all():
+        return np.zeros(len(probes))
+    return fit(gram(Design(r.y, r.nuisance_cols, {cand.name: rows}, r.pooling.groups())), [cand.name],
+               BY_NAME).coefs[cand.name]
+
+
+@dataclass
+class _FoldJob:
+    """One more fold of the cross-validation (folds.py) for a worker process: everything refitted on `train`
+    without `heldout`; the finalists tried on the regions fold 0 chose."""
+    req: DiagnoseRequest
+    train: list[Observed]
+    heldout: list[Observed]
+    faces: np.ndarray
+    body_faces: np.ndarray
+    attached: np.ndarray
+    hands: np.ndarray | None
+    rest: np.ndarray
+    names: list[str]
+    regions: dict[str, np.ndarray | None]
+
+
+def _run_fold(job: _FoldJob, step: Step) -> Fold:
+    """The baseline, residual and regression of this fold's training sequences, the refit without candidates and
+    each finalist's trial (from its regression start, or its probe sizes: _trial_from_starts)."""
+    req, held = job.req, ", ".join(o.name for o in job.heldout)
+    sim, params, _, _, train_l2 = _baseline(req, job.train, job.faces, job.body_faces, job.attached, job.hands,
+                                            job.rest, lambda message: step(f"{message}, without {held}"))
+    baseline_l2 = mean_rollout_error(sim, job.heldout, job.attached)
+    r = _measure(sim, params, job.train, req.seed)
+    config = fit_config(req, req.refit_iterations)
+    null_refit = trial(sim, BASELINE_FIT, [], Context.build(sim, r.batch, None, r.predicted), None, job.train,
+                       job.heldout, job.attached, config)
+    trials = {}
+    for n in job.names:
+        cand = BY_NAME[n]
+        ctx = Context.build(sim, r.batch, job.regions[n], r.predicted)
+        trials[n] = _trial_from_starts(cand, _regressed(cand, ctx, r, req.probe_acceleration), sim, ctx, job.train,
+                                       job.heldout, job.attached, config, req.probe_acceleration)
+        step(f"trial {n} without {held}: held-out L2 {baseline_l2 * 1e3:.1f} -> {trials[n].heldout_l2 * 1e3:.1f} mm")
+    return Fold([o.name for o in job.train], [o.name for o in job.heldout],
+                judge_reference(Trial([], baseline_l2, float("nan"), train_l2), null_refit), trials)

@@ -108,7 +108,17 @@ def sentence(effect: dict, before: float) -> str:
             f"{effect['description']}; refitted {params}. The residual it explains is largest where "
             f"{effect['evidence']['where'].replace('_', ' ')} is high and in frames with high "
             f"{effect['evidence']['when'].replace('_', ' ')}. Adding it lowers the held-out rollout error from "
-            f"{before * 1e3:.1f} mm to {effect['heldout_l2'] * 1e3:.1f} mm ({effect['heldout_gain']:+.0%} gain).")
+            f"{before * 1e3:.1f} mm to {effect['heldout_l2'] * 1e3:.1f} mm ({effect['heldout_gain']:+.0%} gain)"
+            + cross_validated_phrase(effect) + ".")
+
+
+def cross_validated_phrase(effect: dict) -> str:
+    """How much the effect helps with each recording held out once (folds.py), where it was cross-validated."""
+    cv = effect.get("cross_validated")
+    if not cv or not cv["complete"]:
+        return ""
+    return (f"; refitted with each of the {cv['folds']} recordings held out in turn, it lowers the held-out error by "
+            f"{cv['heldout_gain']:.0%} on average")
 
 
 def tilt_phrase(offset: object) -> str:
@@ -162,6 +172,7 @@ def write_html(path: Path, report: dict, vertices: np.ndarray, faces: np.ndarray
         f"<tr><td>{html.escape(e['name'])}</td><td>{html.escape(e['class'])}</td><td>{e['evidence']['explained']:.1%}"
         f"</td><td>{e['uncertainty']['inclusion_probability']:.0%}</td><td>{html.escape(_fmt_params(e))}</td>"
         f"<td>{_pct(e.get('heldout_gain'))}</td><td>{_pct(e.get('train_rollout_gain'))}</td>"
+        f"<td>{_pct((e.get('cross_validated') or {}).get('heldout_gain'))}</td>"
         f"<td>{html.escape(e.get('implausible') or '')}</td></tr>"
         for e in report["effects"])
     withheld = "".join(f"<p>Not tried: {html.escape(n)}, {html.escape(why)}.</p>"
@@ -180,7 +191,8 @@ td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc
 <p>Best-correlated state: {html.escape(loc['step_feature']['meaning'] or loc['step_feature']['name'])}, Spearman
 {loc['step_feature']['spearman']:.2f}.</p><img src="{plot}" alt="residual over time">
 <h2>Candidates</h2><table><tr><th>candidate</th><th>class</th><th>explained</th><th>bootstrap inclusion</th>
-<th>coefficients (regression)</th><th>held-out gain</th><th>training-rollout gain</th><th>not physical because</th>
+<th>coefficients (regression)</th><th>held-out gain</th><th>training-rollout gain</th>
+<th>held-out gain, mean over folds</th><th>not physical because</th>
 </tr>{rows}</table>{withheld}
 <p>Held-out rollout error: {before * 1e3:.2f} mm before, {after * 1e3:.2f} mm after.</p></body></html>"""
     with atomic_path(path) as tmp:

@@ -18,8 +18,9 @@ it through the force library, refit, and show the held-out rollout error before 
    `max_trials`, are each added to the simulator and refitted; one is confirmed only if the held-out rollout
    error drops by at least `min_gain` (and `min_gain_mm`) and the training sequences' free rollouts improve
    too, each against the better of the baseline fit and its refit without candidates (pipeline.judge_reference);
-   of the confirmed, the one whose smaller gain (training or held-out rollouts) is largest is accepted
-   (pipeline.ranked).
+   the `fold_finalists` that gained most are refitted again with each training sequence held out in turn, and
+   confirmed on the mean held-out gain over these folds (gg_core/diagnosis/folds.py); of the confirmed, the one
+   whose smaller mean gain (training or held-out rollouts) is largest is accepted.
 
 Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply) or, for synthetic captures, the ground-truth meshes,
 optionally with spatially correlated noise (motion.py: `--source`, auto by default). truth.json is read only for
@@ -80,6 +81,7 @@ class DiagnoseRequest:
     min_gain_mm: float = 0.25          # ... and absolute (below this the rollouts already match the recording;
                                        # pipeline.confirmed says where it lies)
     max_trials: int = 12               # candidates refitted and judged on rollouts (12: every one that acts)
+    fold_finalists: int = 3            # of those, the ones refitted again with each training sequence held out
     bootstrap: int = 100
     reference: list[str] = field(default_factory=list)   # candidates always trialled (benchmarks), never accepted
     reference_region: str = ""         # .npy of [V] weights for region candidates in reference trials
@@ -213,7 +215,8 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     reference_region = np.load(req.reference_region) if req.reference_region else None
     rest = rest_state(req, train[0].garment[0], mesh_log)
     result = diagnose(req, train, heldout, faces, body_faces, attached, hand_mask(train[0].body.shape[1]),
-                      reference_region, rest, Progress(STAGE, 10 + req.max_trials + len(req.reference), req.progress))
+                      reference_region, rest, Progress(STAGE, 10 + req.max_trials + len(req.reference)
+                                                      + len(train) * (1 + req.fold_finalists), req.progress))
 
     out = project / "diagnose"
     for name, values in (("residual_vertex", result.localization.vertex_map),

@@ -124,6 +124,13 @@ def test_residual_map_colours_the_garment_and_states_the_verdict(blender, tmp_pa
     blender.context.scene.gg.project_path = str(tmp_path / "joint")
     assert blender.ops.gg.show_residuals() == {"FINISHED"}
     assert blender.context.scene.gg.diagnosis == "Missing physics: wind + gravity_offset (held-out error -25% together)"
+    cv = {"heldout_gain": 0.21, "train_rollout_gain": 0.3, "folds": 3, "complete": True}
+    report = {"verdict": "missing", "accepted": ["mass_damping"],            # confirmed over the folds
+              "effects": [{"name": "mass_damping", "heldout_gain": 0.04, "cross_validated": cv}]}
+    _write_diagnosis(tmp_path / "folds", report, np.array([0.0, 1.0, 2.0, 4.0]))
+    blender.context.scene.gg.project_path = str(tmp_path / "folds")
+    assert blender.ops.gg.show_residuals() == {"FINISHED"}
+    assert blender.context.scene.gg.diagnosis == "Missing physics: mass_damping (held-out error -21%, mean of 3 folds)"
 
 
 def test_activity_map_is_a_second_attribute_with_the_residual_still_shown(blender, tmp_path):

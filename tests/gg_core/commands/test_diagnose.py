@@ -108,10 +108,10 @@ def test_bench_scoring():
               "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": None,
               "resolved_by_reference": False},
              {"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
-              "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01, "true_effect_l2": 0.006,
+              "cross_validated_gain": 0.3, "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01, "true_effect_l2": 0.006,
               "resolved_by_reference": True},
              {"true_class": "wind", "predicted": "gravity", "correct": False, "heldout_gain": 0.1,
-              "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": 0.0095,
+              "cross_validated_gain": 0.2, "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": 0.0095,
               "resolved_by_reference": False}]
     summary = summarize(cases, min_gain=0.1)
     assert summary["accuracy_effect_present"] == 0.5 and summary["false_alarm_rate_none"] == 0.0
@@ -120,6 +120,7 @@ def test_bench_scoring():
     # nor does the reference resolve it: at twice Blender's steps it changes by more than itself
     assert summary["cases_resolved_by_reference"] == 1 and summary["accuracy_resolved_by_reference"] == 1.0
     assert summary["median_parameter_error"] == pytest.approx(0.1) and summary["median_gap_closed"] == 0.6
+    assert summary["mean_cross_validated_gain_when_named"] == pytest.approx(0.3)   # the wrongly named one not
     table = confusion(cases).splitlines()
     assert table[0].split()[-3:] == ["gravity", "none", "wind"]
     assert [int(v) for v in table[-1].split()[1:]] == [1, 0, 0]      # wind named gravity

@@ -6,7 +6,7 @@ import pytest
 
 from gg_core.diagnosis.confirm import Trial
 from gg_core.diagnosis.library import CANDIDATES
-from gg_core.diagnosis.pipeline import (confirmed, implausible, judge_reference, propose, ranked, selected,
+from gg_core.diagnosis.pipeline import (confirmed, implausible, judge_reference, propose, selected,
                                        usable_candidates)
 from gg_core.diagnosis.selection import Selection
 from gg_core.physics.cloth import Cloth
@@ -24,19 +24,7 @@ def test_selected_candidates_come_first_then_the_others_by_explained_share_even_
     assert propose(_selection(), 0.95, 12)[0] == "wind"          # not selected often enough: ranked with the rest
 
 
-def test_confirmed_candidates_are_accepted_by_the_smaller_of_their_training_and_heldout_gains():
-    # Blender's hidden wind (seed 2): the tilt rolls the training sequences out better, wind the held-out one more
-    null = Trial([], heldout_l2=0.01059, train_loss=1.0, train_l2=0.01139)
-    trials = {"wind": Trial(["wind"], 0.00874, 1.0, 0.00977),
-              "gravity_offset": Trial(["gravity_offset"], 0.00943, 1.0, 0.00917)}
-    assert ranked(["gravity_offset", "wind"], trials, null) == ["wind", "gravity_offset"]
-    # our simulator's hidden air damping: wind gains more held-out (-16 %) but barely helps training (-3 %)
-    null = Trial([], heldout_l2=0.00369, train_loss=1.0, train_l2=0.00635)
-    trials = {"wind": Trial(["wind"], 0.00310, 1.0, 0.00616), "mass_damping": Trial(["mass_damping"], 0.00321, 1.0,
-                                                                                     0.00432)}
-    assert ranked(["wind", "mass_damping"], trials, null) == ["mass_damping", "wind"]
-    tie = {"a": Trial(["a"], 0.0030, 1.0, 0.004), "b": Trial(["b"], 0.0020, 1.0, 0.004)}
-    assert ranked(["a", "b"], tie, Trial([], 0.004, 1.0, 0.005)) == ["b", "a"]    # equal smaller gain: held-out
+def test_candidates_are_tried_only_when_selected_often_enough():
     sel = Selection(1.0, ["gravity_offset", "air_drag"], {}, {}, {},
                     inclusion={"gravity_offset": 0.7, "air_drag": 0.3})
     assert selected(sel, 0.5) == ["gravity_offset"]
