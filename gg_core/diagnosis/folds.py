@@ -8,7 +8,7 @@ and the torso twist (training-rollout gains of 30-41 %, session 23), gained only
 confirmed. The candidates fold 0 found worth it (`finalists`) are therefore refitted again in the other folds:
 each training sequence is held out in turn, and everything of that fold (baseline, residual, regression start,
 refit) is fitted without it. A candidate is confirmed on the folds' mean held-out gain, and must help the
-held-out rollouts and the training rollouts in every fold.
+held-out rollouts in most folds and the training rollouts in every fold (CrossValidation.confirmed).
 
 What the extra folds do not redo: the choice of finalists and of a region candidate's region (both from fold 0's
 training sequences, which include the sequence a later fold holds out; a spurious choice fitted to that sequence's
@@ -42,8 +42,9 @@ class Fold:
     def to_json(self) -> dict:
         return {"train": self.train, "heldout": self.heldout, "heldout_l2_before": self.reference.heldout_l2,
                 "train_rollout_l2_before": self.reference.train_l2,
-                "trials": {n: {"heldout_l2": t.heldout_l2, "heldout_gain": self.gains(n)[0],
-                               "train_rollout_gain": self.gains(n)[1], "refit": t.values}
+                "trials": {n: {"heldout_l2": t.heldout_l2, "train_rollout_l2": t.train_l2,
+                               "heldout_gain": self.gains(n)[0], "train_rollout_gain": self.gains(n)[1],
+                               "refit": t.values}
                            for n, t in self.trials.items()}}
 
 
@@ -83,12 +84,18 @@ class CrossValidation:
 
     def confirmed(self, name: str, min_gain: float, min_gain_mm: float) -> bool:
         """Trialled in every fold; the mean held-out gain at least `min_gain` and the mean improvement at least
-        `min_gain_mm`; both rollouts better in every fold (a real effect helps every recording)."""
+        `min_gain_mm`; the held-out rollouts better in most folds and the training rollouts in every fold.
+
+        Why most and not every held-out fold: a recording that barely exercises the effect does not show it.
+        Measured (session 24, our simulator's hidden air damping, seed 2): mass damping gained -2 / +28 / +42 %
+        held out on the arm swing / walk / torso twist, where the true effect itself gains -2 % on the arm swing;
+        on Blender's capture with nothing hidden (seed 1), where the arm swing alone had come within 0.5 points of
+        a false alarm, it gained +9.5 / -19 / +7 %: a mean of -1 %."""
         if not self.complete(name):
             return False
         g = self.per_fold(name)
         return bool(g[:, 0].mean() >= min_gain and g[:, 2].mean() >= 1e-3 * min_gain_mm
-                    and (g[:, 0] > 0).all() and (g[:, 1] > 0).all())
+                    and 2 * (g[:, 0] > 0).sum() > len(g) and (g[:, 1] > 0).all())
 
     def ranked(self, passing: list[str]) -> list[str]:
         """Confirmed candidates in the order they are accepted: by the smaller of their mean gains on training and

@@ -145,6 +145,8 @@ class Result:
             "heldout_l2_before": self.heldout_before,
             "heldout_l2_after": self.heldout_after,
             "heldout_gain": 1.0 - self.heldout_after / self.heldout_before,
+            "heldout_gain_cross_validated": (self.cross_validated(self.accepted[0]) or {}).get("heldout_gain")
+            if self.accepted else None,
             "baseline": self.baseline,
             "nuisance_adjustment": self.nuisance,
             "selection": {"order": self.selection.order, "rss_after_nuisance": self.selection.rss_nuisance},

@@ -107,7 +107,7 @@ def sentence(effect: dict, before: float) -> str:
     return (f"Missing {effect['name'].replace('_', ' ')} ({effect['class'].replace('_', ' ')}): "
             f"{effect['description']}; refitted {params}. The residual it explains is largest where "
             f"{effect['evidence']['where'].replace('_', ' ')} is high and in frames with high "
-            f"{effect['evidence']['when'].replace('_', ' ')}. Adding it lowers the held-out rollout error from "
+            f"{effect['evidence']['when'].replace('_', ' ')}. With it, the held-out rollout error goes from "
             f"{before * 1e3:.1f} mm to {effect['heldout_l2'] * 1e3:.1f} mm ({effect['heldout_gain']:+.0%} gain)"
             + cross_validated_phrase(effect) + ".")
 

@@ -27,19 +27,29 @@ def test_finalists_gained_enough_on_heldout_or_training_rollouts_largest_first()
     assert finalists(list(fold.trials), fold, 0.10, 0) == []
 
 
-def test_confirmation_is_on_the_mean_heldout_gain_and_every_fold_must_improve():
+def test_confirmation_is_on_the_mean_heldout_gain_with_most_folds_improving():
     # our simulator's hidden air damping: the arm swing barely shows it, the walk and the twist do
-    cv = CrossValidation([_fold("arm", (0.010, 0.010), air=(0.0095, 0.0065), wind=(0.0085, 0.0099)),
+    cv = CrossValidation([_fold("arm", (0.010, 0.010), air=(0.0102, 0.0065), wind=(0.0085, 0.0099)),
                           _fold("walk", (0.010, 0.010), air=(0.0060, 0.0090), wind=(0.0110, 0.0090)),
                           _fold("twist", (0.010, 0.010), air=(0.0070, 0.0080), wind=(0.0090, 0.0095))])
-    assert cv.mean_gains("air") == pytest.approx((0.25, 0.65 / 3))
+    assert cv.mean_gains("air") == pytest.approx((0.68 / 3, 0.65 / 3))
     assert cv.confirmed("air", 0.10, 0.25)
+    assert cv.confirmed("air", 0.10, 0.25)           # the arm swing alone does not show it: most folds do
     assert not cv.confirmed("wind", 0.10, 0.25)       # mean 5 % held-out, and worse without the walk
     assert not cv.confirmed("air", 0.30, 0.25)
     assert not cv.confirmed("air", 0.10, 3.0)         # 2.5 mm on average: under a 3 mm floor
     lucky = CrossValidation([_fold("arm", (0.010, 0.010), x=(0.005, 0.009)),
                              _fold("walk", (0.010, 0.010), x=(0.006, 0.011))])   # training worse without the walk
     assert not lucky.confirmed("x", 0.10, 0.25)
+    one_fold = CrossValidation([_fold("arm", (0.010, 0.010), x=(0.0103, 0.009)),   # mean 14 %, from one fold
+                                _fold("walk", (0.010, 0.010), x=(0.0050, 0.009)),
+                                _fold("twist", (0.010, 0.010), x=(0.0104, 0.009))])
+    assert one_fold.mean_gains("x")[0] > 0.1 and not one_fold.confirmed("x", 0.10, 0.25)
+    # Blender's capture with nothing hidden (seed 1): mass damping +9.5 / -19 / +7 % held out
+    none = CrossValidation([_fold("arm", (0.010, 0.010), x=(0.00905, 0.0086)),
+                            _fold("walk", (0.010, 0.010), x=(0.0119, 0.0083)),
+                            _fold("twist", (0.010, 0.010), x=(0.0093, 0.0097))])
+    assert not none.confirmed("x", 0.10, 0.25)
 
 
 def test_a_candidate_missing_from_a_fold_is_not_confirmed_and_one_fold_is_the_given_split():
