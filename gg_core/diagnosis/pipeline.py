@@ -105,7 +105,7 @@ class Result:
             return None
         held, train = self.cv.mean_gains(name)
         return {"heldout_gain": held, "train_rollout_gain": train, "folds": n_folds,
-                "complete": self.cv.complete(name)}
+                "complete": self.cv.complete(name), "refit_range": self.cv.refit_ranges(name)}
 
     def effects(self) -> list[dict]:
         sel = self.selection

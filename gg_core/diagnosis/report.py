@@ -117,8 +117,9 @@ def cross_validated_phrase(effect: dict) -> str:
     cv = effect.get("cross_validated")
     if not cv or not cv["complete"]:
         return ""
+    ranges = ", ".join(f"{k} {_fmt(lo)} to {_fmt(hi)}" for k, (lo, hi) in cv.get("refit_range", {}).items())
     return (f"; refitted with each of the {cv['folds']} recordings held out in turn, it lowers the held-out error by "
-            f"{cv['heldout_gain']:.0%} on average")
+            f"{cv['heldout_gain']:.0%} on average" + (f" (refitted values over the folds: {ranges})" if ranges else ""))
 
 
 def tilt_phrase(offset: object) -> str:

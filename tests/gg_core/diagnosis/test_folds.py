@@ -73,3 +73,11 @@ def test_confirmed_candidates_are_ranked_by_the_smaller_of_their_mean_gains():
     summary = tie.to_json()
     assert summary["candidates"]["b"]["folds"] == 1 and summary["folds"][0]["heldout"] == ["arm"]
     assert summary["folds"][0]["trials"]["b"]["heldout_gain"] == pytest.approx(0.5)
+
+
+def test_refit_ranges_span_the_folds_refits_per_component_without_the_material():
+    folds = [_fold(held, (0.01, 0.01), wind=(0.008, 0.008)) for held in ("arm", "walk", "twist")]
+    for fold, alpha, push in zip(folds, (7.9, 12.7, 12.0), ((1.0, 0.0, 2.0), (3.0, 0.5, 1.0), (2.0, 0.2, 0.5))):
+        fold.trials["wind"].values = {"material.density": 0.2, "mass_damping.alpha": alpha, "wind.pressure": push}
+    ranges = CrossValidation(folds).refit_ranges("wind")
+    assert ranges == {"mass_damping.alpha": [7.9, 12.7], "wind.pressure": [[1.0, 0.0, 0.5], [3.0, 0.5, 2.0]]}

@@ -38,9 +38,10 @@ def test_sentence_and_page(tmp_path):
     assert "material" not in text
     assert "gravity tilted 12.1 deg from the vertical, towards azimuth 3 deg" in text   # atan(2.1 / 9.81)
     assert "held out in turn" not in text
-    folds = sentence({**EFFECT, "cross_validated": {"heldout_gain": 0.31, "folds": 3, "complete": True}}, 0.012)
+    folds = sentence({**EFFECT, "cross_validated": {"heldout_gain": 0.31, "folds": 3, "complete": True,
+                                                    "refit_range": {"mass_damping.alpha": [7.88, 12.7]}}}, 0.012)
     assert folds.endswith("with each of the 3 recordings held out in turn, it lowers the held-out error by 31% on "
-                          "average.")
+                          "average (refitted values over the folds: mass_damping.alpha 7.88 to 12.7).")
     v, f = sheet(4, 4, 0.5, 0.5)
     report = {"verdict": "missing", "accepted": ["gravity_offset"], "effects": [EFFECT],
               "heldout_l2_before": 0.012, "heldout_l2_after": 0.006, "outputs": {},
