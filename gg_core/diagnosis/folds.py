@@ -40,12 +40,13 @@ class Fold:
         return (1.0 - t.heldout_l2 / ref.heldout_l2, 1.0 - t.train_l2 / ref.train_l2, ref.heldout_l2 - t.heldout_l2)
 
     def to_json(self) -> dict:
+        trials = {}
+        for n, t in self.trials.items():
+            held, train, _ = self.gains(n)
+            trials[n] = {"heldout_l2": t.heldout_l2, "train_rollout_l2": t.train_l2, "heldout_gain": held,
+                         "train_rollout_gain": train, "refit": t.values}
         return {"train": self.train, "heldout": self.heldout, "heldout_l2_before": self.reference.heldout_l2,
-                "train_rollout_l2_before": self.reference.train_l2,
-                "trials": {n: {"heldout_l2": t.heldout_l2, "train_rollout_l2": t.train_l2,
-                               "heldout_gain": self.gains(n)[0], "train_rollout_gain": self.gains(n)[1],
-                               "refit": t.values}
-                           for n, t in self.trials.items()}}
+                "train_rollout_l2_before": self.reference.train_l2, "trials": trials}
 
 
 def extra_splits(train: list[str], heldout: list[str]) -> list[tuple[list[str], list[str]]]:
@@ -54,14 +55,14 @@ def extra_splits(train: list[str], heldout: list[str]) -> list[tuple[list[str], 
     return [([n for n in names if n != s], [s]) for s in train]
 
 
-def finalists(names: list[str], fold: Fold, min_gain: float, count: int) -> list[str]:
-    """At most `count` candidates worth the other folds: those whose fold-0 refit gained at least `min_gain` on
-    the held-out or on the training rollouts, by the larger of those gains."""
+def finalists(fold: Fold, min_gain: float, count: int) -> list[str]:
+    """At most `count` of the fold's candidates worth the other folds: those whose refit gained at least
+    `min_gain` on the held-out or on the training rollouts, by the larger of those gains."""
     def larger(n: str) -> float:
         held, train, _ = fold.gains(n)
         return max(held, train)
 
-    return sorted((n for n in names if larger(n) >= min_gain), key=lambda n: -larger(n))[:count]
+    return sorted((n for n in fold.trials if larger(n) >= min_gain), key=lambda n: -larger(n))[:count]
 
 
 @dataclass
@@ -74,8 +75,12 @@ class CrossValidation:
         """[F,3] Fold.gains of `name` in every fold that trialled it."""
         return np.array([f.gains(name) for f in self.folds if name in f.trials])
 
+    def count(self, name: str) -> int:
+        """How many folds trialled `name`."""
+        return sum(name in f.trials for f in self.folds)
+
     def complete(self, name: str) -> bool:
-        return all(name in f.trials for f in self.folds)
+        return self.count(name) == len(self.folds)
 
     def mean_gains(self, name: str) -> tuple[float, float]:
         """(mean held-out gain, mean training-rollout gain) over the folds."""
@@ -128,4 +133,4 @@ class CrossValidation:
         names = sorted({n for f in self.folds for n in f.trials})
         return {"folds": [f.to_json() for f in self.folds],
                 "candidates": {n: dict(zip(("heldout_gain", "train_rollout_gain"), self.mean_gains(n)),
-                                       folds=int(len(self.per_fold(n)))) for n in names}}
+                                       folds=self.count(n)) for n in names}}

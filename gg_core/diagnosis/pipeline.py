@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -100,7 +100,7 @@ class Result:
 
     def cross_validated(self, name: str) -> dict | None:
         """The candidate's mean gains over the folds that trialled it (folds.py), where there was more than one."""
-        n_folds = len(self.cv.per_fold(name)) if name in self.cv.folds[0].trials else 0
+        n_folds = self.cv.count(name) if name in self.cv.folds[0].trials else 0
         if n_folds < 2:
             return None
         held, train = self.cv.mean_gains(name)
@@ -276,7 +276,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     timings["trials_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    final = finalists(list(first.trials), first, req.min_gain, req.fold_finalists)
+    final = finalists(first, req.min_gain, req.fold_finalists)
     folds = [first]
     if final:
         fold_jobs = [_FoldJob(req, [o for o in train + heldout if o.name in fit_on],
@@ -485,8 +485,9 @@ def _reference_trial(cand: Candidate, sim: ImplicitSimulator, r: Measured, regio
     true region), started from its regression coefficients on that region (its probe sizes where those are 0 or
     the probe's step failed)."""
     ctx = Context.build(sim, r.batch, region if cand.needs_region else None, r.predicted)
-    sizes = np.array([size for size, _ in cand.probes(ctx, req.probe_acceleration)])
-    coefs = _regressed(cand, ctx, r, req.probe_acceleration)
+    probes = cand.probes(ctx, req.probe_acceleration)
+    sizes = np.array([size for size, _ in probes])
+    coefs = _regressed(cand, ctx, r, probes)
     return trial(sim, BASELINE_FIT, [(cand, np.where(coefs != 0, coefs, sizes))], ctx, ctx.region, train, heldout,
                  attached, fit_config(req, req.refit_iterations))
 
@@ -519,10 +520,9 @@ def _measure(sim: ImplicitSimulator, params: BehaviorParams, train: list[Observe
                     res - np.einsum("k,knvc->nvc", adjust, nuisance))
 
 
-def _regressed(cand: Candidate, ctx: Context, r: Measured, acceleration: float) -> np.ndarray:
-    """`cand`'s coefficients regressed alone on the residual beside the nuisance columns (as Selection.alone);
-    zero where the regression puts nothing or the probe's step failed."""
-    probes = cand.probes(ctx, acceleration)
+def _regressed(cand: Candidate, ctx: Context, r: Measured, probes: list[tuple[float, Callable]]) -> np.ndarray:
+    """`cand`'s coefficients regressed alone on the residual beside the nuisance columns (as Selection.alone), from
+    its `probes` (Candidate.probes); zero where the regression puts nothing or the probe's step failed."""
     rows = r.pooling.rows(responses(ctx.sim, ctx.batch, r.predicted, probes)).T
     if not np.isfinite(rows).all():
         return np.zeros(len(probes))
@@ -561,8 +561,9 @@ def _run_fold(job: _FoldJob, step: Step) -> Fold:
     for n in job.names:
         cand = BY_NAME[n]
         ctx = Context.build(sim, r.batch, job.regions[n], r.predicted)
-        trials[n] = _trial_from_starts(cand, _regressed(cand, ctx, r, req.probe_acceleration), sim, ctx, job.train,
-                                       job.heldout, job.attached, config, req.probe_acceleration)
+        coefs = _regressed(cand, ctx, r, cand.probes(ctx, req.probe_acceleration))
+        trials[n] = _trial_from_starts(cand, coefs, sim, ctx, job.train, job.heldout, job.attached, config,
+                                       req.probe_acceleration)
         step(f"trial {n} without {held}: held-out L2 {baseline_l2 * 1e3:.1f} -> {trials[n].heldout_l2 * 1e3:.1f} mm")
     return Fold([o.name for o in job.train], [o.name for o in job.heldout],
                 judge_reference(Trial([], baseline_l2, float("nan"), train_l2), null_refit), trials)

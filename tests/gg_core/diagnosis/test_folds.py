@@ -22,9 +22,9 @@ def test_finalists_gained_enough_on_heldout_or_training_rollouts_largest_first()
     fold = _fold("arm", (0.010, 0.010), air=(0.0095, 0.0065), wind=(0.0085, 0.0099), tilt=(0.0097, 0.0095),
                  drag=(0.0080, 0.0080))
     # air: 5 % held-out but 35 % training; wind 15 % held-out; tilt 5 % / 5 %: not worth more folds
-    assert finalists(list(fold.trials), fold, 0.10, 3) == ["air", "drag", "wind"]
-    assert finalists(list(fold.trials), fold, 0.10, 1) == ["air"]
-    assert finalists(list(fold.trials), fold, 0.10, 0) == []
+    assert finalists(fold, 0.10, 3) == ["air", "drag", "wind"]
+    assert finalists(fold, 0.10, 1) == ["air"]
+    assert finalists(fold, 0.10, 0) == []
 
 
 def test_confirmation_is_on_the_mean_heldout_gain_with_most_folds_improving():
