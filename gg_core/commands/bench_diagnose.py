@@ -210,6 +210,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         "true_class": true_class, "predicted": predicted, "accepted": report["accepted"],
         "correct": predicted == true_class,
         "proposed": report["selection"]["order"],
+        "rollouts_first": report.get("cross_validation", {}).get("rollouts_first"),   # where the residual overruled
         "implausible": [e["name"] for e in report["effects"] if e.get("implausible")],
         "heldout_l2_before": before, "heldout_l2_after": after, "heldout_gain": 1.0 - after / before,
         "cross_validated_gain": None if accepted is None or not accepted.get("cross_validated")
@@ -235,6 +236,7 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
     gains = [c["heldout_gain"] for c in present if c["correct"]]
     cv_gains = [c["cross_validated_gain"] for c in present if c["correct"] and c["cross_validated_gain"] is not None]
     closed = [c["gap_closed"] for c in present if c["gap_closed"] is not None]
+    overruled = [c for c in cases if c["rollouts_first"]]
 
     def mean(xs: list[float]) -> float | None:
         return float(np.mean(xs)) if xs else None
@@ -257,7 +259,9 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
             "median_parameter_error": float(np.median(errors)) if errors else None,
             "mean_heldout_gain_when_named": mean(gains),
             "mean_cross_validated_gain_when_named": mean(cv_gains),
-            "median_gap_closed": float(np.median(closed)) if closed else None}
+            "median_gap_closed": float(np.median(closed)) if closed else None,
+            "residual_tie_breaks": len(overruled),
+            "residual_tie_breaks_right": sum(c["correct"] for c in overruled)}
 
 
 def confusion(cases: list[dict]) -> str:

@@ -68,6 +68,7 @@ class Result:
     timings: dict[str, float] = field(default_factory=dict)
     scans: dict[str, ScanResult] = field(default_factory=dict)   # region candidates that found their own region
     withheld: dict[str, str] = field(default_factory=dict)       # candidates not tried on these data, and why
+    rollouts_first: str | None = None  # the rollouts' first choice where the residual named another (tie-break)
 
     def region_of(self, name: str) -> np.ndarray | None:
         """The region candidate `name` acted on: its scan's, or the localization's."""
@@ -131,6 +132,7 @@ class Result:
                 "heldout_gain": None if t is None else self.gain(t),
                 "train_rollout_gain": None if t is None else self.train_gain(t),
                 "cross_validated": self.cross_validated(n),
+                "residual_chose_over": self.rollouts_first if self.accepted[:1] == [n] else None,
                 "implausible": self.unphysical.get(n),
             })
         return out
@@ -168,7 +170,7 @@ class Result:
             "null_refit": {"heldout_l2": self.null_refit.heldout_l2, "train_rollout_l2": self.null_refit.train_l2},
             "reference_trials": {n: self.trial_summary(t) for n, t in self.reference.items()},
             "joint_trials": {n: self.trial_summary(t) for n, t in self.trials.items() if len(t.names) > 1},
-            "cross_validation": self.cv.to_json(),
+            "cross_validation": {**self.cv.to_json(), "rollouts_first": self.rollouts_first},
             "withheld_candidates": self.withheld,
         }
 
@@ -289,8 +291,9 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
             if n not in unphysical and (why := implausible(t, sim.cloth)):
                 unphysical[n] = f"{why} (refitted without {', '.join(fold.heldout)})"
     cv = CrossValidation(folds)
-    passing = cv.ranked([n for n in first.trials if cv.confirmed(n, req.min_gain, req.min_gain_mm)
-                         and n not in unphysical])
+    by_rollouts = cv.ranked([n for n in first.trials if cv.confirmed(n, req.min_gain, req.min_gain_mm)
+                             and n not in unphysical])
+    passing = cv.residual_tie_break(by_rollouts, proposed)
     timings["folds_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -323,7 +326,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     baseline.update(starts)
     return Result(loc, sel, trials, accepted, null, null_refit, after, baseline,
                   dict(zip(r.labels, r.adjust.tolist())), r.batch, unphysical, progress, cv, reference, timings, scans,
-                  withheld)
+                  withheld, by_rollouts[0] if by_rollouts and passing[0] != by_rollouts[0] else None)
 
 
 def usable_candidates(rest_given: bool) -> tuple[list[Candidate], dict[str, str]]:

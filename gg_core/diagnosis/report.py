@@ -109,7 +109,17 @@ def sentence(effect: dict, before: float) -> str:
             f"{effect['evidence']['where'].replace('_', ' ')} is high and in frames with high "
             f"{effect['evidence']['when'].replace('_', ' ')}. With it, the held-out rollout error goes from "
             f"{before * 1e3:.1f} mm to {effect['heldout_l2'] * 1e3:.1f} mm ({effect['heldout_gain']:+.0%} gain)"
-            + cross_validated_phrase(effect) + ".")
+            + cross_validated_phrase(effect) + residual_choice_phrase(effect) + ".")
+
+
+def residual_choice_phrase(effect: dict) -> str:
+    """Where the rollouts could not tell this effect from another and the residual's pattern named it
+    (folds.CrossValidation.residual_tie_break)."""
+    other = effect.get("residual_chose_over")
+    if not other:
+        return ""
+    return (f"; {other.replace('_', ' ')} rolls the recordings out about as well (not better in every fold), and "
+            f"the pattern of the residual forces chose {effect['name'].replace('_', ' ')}")
 
 
 def cross_validated_phrase(effect: dict) -> str:

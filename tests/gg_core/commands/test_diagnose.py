@@ -106,13 +106,13 @@ def test_bench_scoring():
     assert parameter_error(patch, refit) == pytest.approx(29.84 / 29)   # both scales must be right
     cases = [{"true_class": "none", "predicted": "none", "correct": True, "heldout_gain": 0.0, "gap_closed": None,
               "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": None,
-              "resolved_by_reference": False},
+              "resolved_by_reference": False, "rollouts_first": None},
              {"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
               "cross_validated_gain": 0.3, "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01, "true_effect_l2": 0.006,
-              "resolved_by_reference": True},
+              "resolved_by_reference": True, "rollouts_first": "wind"},
              {"true_class": "wind", "predicted": "gravity", "correct": False, "heldout_gain": 0.1,
               "cross_validated_gain": 0.2, "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": 0.0095,
-              "resolved_by_reference": False}]
+              "resolved_by_reference": False, "rollouts_first": None}]
     summary = summarize(cases, min_gain=0.1)
     assert summary["accuracy_effect_present"] == 0.5 and summary["false_alarm_rate_none"] == 0.0
     # the wind case's true effect gains only 5 %: not detectable at a 10 % acceptance gain
@@ -121,6 +121,7 @@ def test_bench_scoring():
     assert summary["cases_resolved_by_reference"] == 1 and summary["accuracy_resolved_by_reference"] == 1.0
     assert summary["median_parameter_error"] == pytest.approx(0.1) and summary["median_gap_closed"] == 0.6
     assert summary["mean_cross_validated_gain_when_named"] == pytest.approx(0.3)   # the wrongly named one not
+    assert summary["residual_tie_breaks"] == 1 and summary["residual_tie_breaks_right"] == 1   # rollouts: wind
     table = confusion(cases).splitlines()
     assert table[0].split()[-3:] == ["gravity", "none", "wind"]
     assert [int(v) for v in table[-1].split()[1:]] == [1, 0, 0]      # wind named gravity

@@ -42,6 +42,9 @@ def test_sentence_and_page(tmp_path):
                                                     "refit_range": {"mass_damping.alpha": [7.88, 12.7]}}}, 0.012)
     assert folds.endswith("with each of the 3 recordings held out in turn, it lowers the held-out error by 31% on "
                           "average (refitted values over the folds: mass_damping.alpha 7.88 to 12.7).")
+    tie = sentence({**EFFECT, "name": "wind", "residual_chose_over": "gravity_offset"}, 0.012)
+    assert tie.endswith("; gravity offset rolls the recordings out about as well (not better in every fold), and the "
+                        "pattern of the residual forces chose wind.")
     v, f = sheet(4, 4, 0.5, 0.5)
     report = {"verdict": "missing", "accepted": ["gravity_offset"], "effects": [EFFECT],
               "heldout_l2_before": 0.012, "heldout_l2_after": 0.006, "outputs": {},
