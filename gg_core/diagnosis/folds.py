@@ -92,11 +92,11 @@ class CrossValidation:
         vectors): how closely the recordings determine it. Measured (session 24, our simulator's hidden air
         damping, seed 2): alpha 7.9 / 12.7 / 12.0 /s without the arm swing / walk / twist, the truth 10."""
         values = [f.trials[name].values for f in self.folds if name in f.trials]
+        keys = dict.fromkeys(k for vals in values for k in vals if not k.startswith("material."))
         out = {}
-        for key in values[0]:
-            if not key.startswith("material."):
-                v = np.array([vals[key] for vals in values], np.float64)
-                out[key] = [v.min(0).tolist(), v.max(0).tolist()]
+        for key in keys:    # a fold refits only some components of some candidates (anisotropy: the positive ones)
+            v = np.array([vals[key] for vals in values if key in vals], np.float64)
+            out[key] = [v.min(0).tolist(), v.max(0).tolist()]
         return out
 
     def confirmed(self, name: str, min_gain: float, min_gain_mm: float) -> bool:

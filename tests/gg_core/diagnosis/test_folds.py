@@ -101,3 +101,9 @@ def test_refit_ranges_span_the_folds_refits_per_component_without_the_material()
         fold.trials["wind"].values = {"material.density": 0.2, "mass_damping.alpha": alpha, "wind.pressure": push}
     ranges = CrossValidation(folds).refit_ranges("wind")
     assert ranges == {"mass_damping.alpha": [7.9, 12.7], "wind.pressure": [[1.0, 0.0, 0.5], [3.0, 0.5, 2.0]]}
+    folds[1].trials["wind"].values = {"anisotropic_stretch.k_weft": 3e4}     # its warp was not refitted there
+    folds[0].trials["wind"].values = {"anisotropic_stretch.k_warp": 2e4, "anisotropic_stretch.k_weft": 1e4}
+    assert CrossValidation(folds).refit_ranges("wind") == {"anisotropic_stretch.k_warp": [2e4, 2e4],
+                                                           "anisotropic_stretch.k_weft": [1e4, 3e4],
+                                                           "mass_damping.alpha": [12.0, 12.0],
+                                                           "wind.pressure": [[2.0, 0.2, 0.5], [2.0, 0.2, 0.5]]}
