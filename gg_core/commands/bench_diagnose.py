@@ -287,6 +287,8 @@ def run(args: argparse.Namespace) -> int:
                           f"{case['heldout_l2_before'] * 1e3:.1f} -> {case['heldout_l2_after'] * 1e3:.1f} mm"
                           + ("" if case["cross_validated_gain"] is None else
                              f" ({-case['cross_validated_gain']:+.0%} over the folds)")
+                          + ("" if not case["rollouts_first"] else
+                             f" (the rollouts led with {case['rollouts_first']}, the residual chose)")
                           + ("" if case["true_effect_l2"] is None else
                              f", true effect {case['true_effect_l2'] * 1e3:.1f} mm")
                           + f"; motion change {case['signal_mm']:.1f} mm, {case['step_change_mm']:.1f} mm "
