@@ -229,7 +229,8 @@ def region_groups(report: dict) -> dict[str, list[int]]:
 def summary(report: dict) -> str:
     """One line for the panel: the verdict, the accepted effects and how much they lower the held-out rollout
     error (each alone, as the mean over the folds where it was cross-validated, or together where two were
-    accepted: the joint refit is what was confirmed), and the candidate it was chosen over where the rollouts tied
+    accepted: the joint refit is what was confirmed), the form it was refitted in where the candidate has several
+    (library.Form), and the candidate it was chosen over where the rollouts tied
     (folds.CrossValidation.residual_tie_break)."""
     if report.get("verdict") != "missing":
         return "Nothing missing: the simulator explains the recordings"
@@ -243,9 +244,12 @@ def summary(report: dict) -> str:
         cv = effect.get("cross_validated") or {}
         over = f"; chosen over {effect['residual_chose_over']} by the residual" if effect.get("residual_chose_over") \
             else ""
+        label = f"{name} as {effect['form']}" if effect.get("form") else name
         if cv.get("complete"):
-            return f"{name} (held-out error {-cv['heldout_gain']:+.0%}, mean of {cv['folds']} folds{over})"
-        return name if effect.get("heldout_gain") is None else f"{name} (held-out error {-effect['heldout_gain']:+.0%})"
+            return f"{label} (held-out error {-cv['heldout_gain']:+.0%}, mean of {cv['folds']} folds{over})"
+        if effect.get("heldout_gain") is None:
+            return label
+        return f"{label} (held-out error {-effect['heldout_gain']:+.0%})"
 
     return "Missing physics: " + ", ".join(gain(name) for name in accepted)
 

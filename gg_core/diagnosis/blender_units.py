@@ -20,7 +20,8 @@ def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
     normal approach v_n, i.e. Coulomb mu = 0.01 friction against the collision impulse; ours acts against the
     penalty's normal force, so this too is approximate (the estimate is the total: the baseline's 0.5 included).
     Wind strength has no counterpart in our units and is not scored. Captures of our own simulator
-    (resimulated.py) record their hidden terms under effect.ours; friction is then our coefficient.
+    (resimulated.py) record their hidden terms under effect.ours; friction is then our coefficient, wind the
+    velocity of the moving air (scored where the diagnosis refitted wind in that form, library.MOVING_AIR).
 
     gravity: the tilt, tan of its angle from the vertical along x and z. The diagnosis's vertical gravity stays
     9.81 m/s^2 (a vertical change is the material's free scale: pipeline.BASELINE_FIT), so its horizontal offset
@@ -40,6 +41,8 @@ def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
         return {"body_friction.mu": float(ours["body_friction"]["mu"])}
     if effect == "friction":
         return {"body_friction.mu": 0.01 * float(params["friction"])}
+    if effect == "wind" and "wind" in ours:
+        return {"wind.velocity": [float(v) for v in ours["wind"]["velocity"]]}
     if effect == "shrink":
         return {"region.rest_scale": 1.0 - float(params["factor"])}
     if effect == "stiff_patch":

@@ -79,6 +79,7 @@ class Trial:
     values: dict[str, object] = field(default_factory=dict)
     seconds: float = 0.0
     start: str = "regression"   # where the refit started: the regression's coefficients, or the probe sizes
+    form: str = ""              # the candidate's Form (library.py) the trial refitted; "" its own model
 
 
 def merge(changes: list[ModelChange]) -> ModelChange:

@@ -44,7 +44,7 @@ class Fold:
         for n, t in self.trials.items():
             held, train, _ = self.gains(n)
             trials[n] = {"heldout_l2": t.heldout_l2, "train_rollout_l2": t.train_l2, "heldout_gain": held,
-                         "train_rollout_gain": train, "refit": t.values}
+                         "train_rollout_gain": train, "refit": t.values, "form": t.form or None}
         return {"train": self.train, "heldout": self.heldout, "heldout_l2_before": self.reference.heldout_l2,
                 "train_rollout_l2_before": self.reference.train_l2, "trials": trials}
 

@@ -41,7 +41,6 @@ from ..physics.simulator import ImplicitSimulator
 from ..physics.terms import StepInputs, Term
 from .residuals import FrameBatch
 
-AXES = ("x", "y", "z")
 GRAVITY = 9.81              # m/s^2
 MIN_TERMINAL_SPEED = 0.3    # m/s: slower free fall in air is not cloth (module docstring)
 AIR_DENSITY = 1.2           # kg/m^3
@@ -137,6 +136,16 @@ def applied(sim: ImplicitSimulator, change: ModelChange, region: np.ndarray | No
 
 
 @dataclass(frozen=True)
+class Form:
+    """Another way a candidate's effect can enter the simulator, from the same regressed coefficients: trials refit
+    the candidate's own model and each form, and the training rollouts choose (pipeline._trial_in_best_form)."""
+
+    label: str
+    description: str
+    model: Callable[[np.ndarray, Context], ModelChange]
+
+
+@dataclass(frozen=True)
 class Candidate:
     name: str
     equivalence: str
@@ -151,6 +160,10 @@ class Candidate:
     plausibility: Callable[[dict[str, object], Cloth], str | None] | None = None
     rollout_values: tuple[float, ...] = ()   # coefficients also tried on training rollouts (confirm.trial)
     needs_unloaded_rest: bool = False        # tried only against a given rest mesh (pipeline.usable_candidates)
+    forms: tuple[Form, ...] = ()             # alternative models of the same coefficients
+
+    def form(self, label: str) -> Form | None:
+        return next((f for f in self.forms if f.label == label), None)
 
     def implausible(self, values: dict[str, object], cloth: Cloth) -> str | None:
         """Why the refitted `values` (Trial.values) are not physical for `cloth` (its rest shape), or None."""
@@ -183,8 +196,13 @@ def _scalar_term(term: str, key: str) -> Callable[[np.ndarray, Context], ModelCh
     return lambda c, ctx: ModelChange({term: {key: float(c[0])}}, (f"{term}.{key}",))
 
 
-def _vector_term(term: str, key: str) -> Callable[[np.ndarray, Context], ModelChange]:
-    return lambda c, ctx: ModelChange({term: {key: tuple(float(v) for v in c)}}, (f"{term}.{key}",))
+def _horizontal_term(term: str, key: str) -> Callable[[np.ndarray, Context], ModelChange]:
+    """Coefficients (x, z) of a horizontal vector parameter (y up), refitted as one vector (confirm.py)."""
+    return lambda c, ctx: ModelChange({term: {key: (float(c[0]), 0.0, float(c[1]))}}, (f"{term}.{key}",))
+
+
+def _horizontal_columns(term: str, key: str) -> Callable[[Context], np.ndarray]:
+    return _term_columns(term, [{key: (1.0, 0.0, 0.0)}, {key: (0.0, 0.0, 1.0)}])
 
 
 def _added_term(term: str, key: str) -> Callable[[np.ndarray, Context], ModelChange]:
@@ -232,6 +250,22 @@ def _gravity_tilt(values: dict[str, object], cloth: Cloth) -> str | None:
         return None
     return (f"a sideways gravity of {sideways:.3g} m/s^2 exceeds g ({GRAVITY} m/s^2), which no tilt reaches: the "
             f"term stands in for something other than gravity")
+
+
+def _moving_air(c: np.ndarray, ctx: Context) -> ModelChange:
+    """Horizontal wind pressure coefficients (Pa) as air moving at the speed whose drag on a face-on panel at rest
+    is that pressure: coef |w|^2 = |p|, with coef = rho_air C_d / 2 of the wind term's default (C_d 1)."""
+    coef = TERMS["wind"].defaults["coef"]
+    pressure = np.array([c[0], 0.0, c[1]], np.float64)
+    size = float(np.linalg.norm(pressure))
+    velocity = pressure / size * np.sqrt(size / coef) if size > 0 else pressure
+    return ModelChange({"wind": {"velocity": tuple(float(v) for v in velocity), "coef": coef}}, ("wind.velocity",))
+
+
+MOVING_AIR = Form(
+    "moving air", "steady horizontal wind as air moving at velocity w: quadratic drag -coef A |v_n - w_n| (v_n - "
+    "w_n) n against it, pushing regions that face the wind even at rest and damping their motion relative to the "
+    "air", _moving_air)
 
 
 def _anisotropy_model(c: np.ndarray, ctx: Context) -> ModelChange:
@@ -301,10 +335,11 @@ CANDIDATES: tuple[Candidate, ...] = (
               _term_columns("air_drag", [{"coef": 1.0}]), _scalar_term("air_drag", "coef"),
               plausibility=_quadratic_drag),
     Candidate("wind", "wind",
-              "steady wind pressure A (n.w) n: regions facing the wind, even at rest, not along it",
-              tuple(f"pressure_{a}" for a in AXES), "Pa", (-np.inf, np.inf),
-              _term_columns("wind_pressure", [{"pressure": tuple(np.eye(3)[k])} for k in range(3)]),
-              _vector_term("wind_pressure", "pressure")),
+              "steady horizontal wind pressure A (n.w) n: regions facing the wind, even at rest, not along it (a "
+              "vertical pressure is weight on the upward-facing cloth, left to the material and nuisance fits)",
+              ("pressure_x", "pressure_z"), "Pa", (-np.inf, np.inf),
+              _horizontal_columns("wind_pressure", "pressure"), _horizontal_term("wind_pressure", "pressure"),
+              forms=(MOVING_AIR,)),
     Candidate("mass_damping", "linear_damping",
               "extra linear damping -alpha m v (Rayleigh mass damping, the same as linear isotropic air drag for "
               "uniform density): everywhere, in all directions, proportional to speed",
@@ -329,9 +364,7 @@ CANDIDATES: tuple[Candidate, ...] = (
               "tilted gravity, a uniform horizontal acceleration m dg: everywhere, constant, not gated by n (its "
               "vertical part is confounded with the rest frame's prestress and left to the nuisance fit)",
               ("delta_g_x", "delta_g_z"), "m/s^2", (-np.inf, np.inf),
-              _term_columns("gravity_offset", [{"delta_g": (1.0, 0.0, 0.0)}, {"delta_g": (0.0, 0.0, 1.0)}]),
-              lambda c, ctx: ModelChange({"gravity_offset": {"delta_g": (float(c[0]), 0.0, float(c[1]))}},
-                                         ("gravity_offset.delta_g",)),
+              _horizontal_columns("gravity_offset", "delta_g"), _horizontal_term("gravity_offset", "delta_g"),
               plausibility=_gravity_tilt),
     _region_candidate("heavy_region", "heavy_region",
                       "a heavier region (relative density increase s): static sag and inertial lag on that region",

@@ -95,7 +95,7 @@ def our_effect(name: str, assignments: list[str], reference_truth: dict) -> tupl
     elif name == "wind":
         field_ = resolved.blender["force_fields"][0]
         velocity = np.asarray(field_["direction"], np.float64) * WIND_SPEED_PER_STRENGTH * float(p["strength"])
-        ours = OurEffect({"wind": {"velocity": tuple(velocity)}})
+        ours = OurEffect({"wind": {"velocity": tuple(velocity)}}, parameters={"wind.velocity": velocity.tolist()})
     elif name == "none":
         ours = OurEffect()
     else:

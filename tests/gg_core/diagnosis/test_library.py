@@ -7,9 +7,9 @@ import pytest
 import torch
 from physics_helpers import random_cloth, random_step
 
-from gg_core.diagnosis.library import BY_NAME, CANDIDATES, SYNTH_EFFECT_CLASS, Context, applied
+from gg_core.diagnosis.library import BY_NAME, CANDIDATES, MOVING_AIR, SYNTH_EFFECT_CLASS, Context, applied
 from gg_core.diagnosis.residuals import FrameBatch
-from gg_core.physics.forces import DEFAULT_TERMS, WindPressure, make_terms
+from gg_core.physics.forces import DEFAULT_TERMS, Wind, WindPressure, make_terms
 from gg_core.physics.simulator import ImplicitSimulator
 from gg_core.physics.terms import System
 from gg_core.synth.effects import EFFECTS
@@ -71,3 +71,23 @@ def test_wind_pressure_term_assembles_its_energy_gradient(context):
     normals = step.normal_prev
     expected = (sim.num.vertex_area * (normals @ np.array([3.0, -1.0, 2.0])))[:, None] * normals
     assert np.allclose(-system.grad, expected)                 # force A (n.w) n
+
+
+def test_wind_is_horizontal_and_its_moving_air_form_pushes_a_resting_panel_as_the_pressure_does(context):
+    """The candidate's pressure has no vertical part; as moving air (library.MOVING_AIR) the same coefficients
+    are air at the speed whose drag on a face-on panel at rest is that pressure: coef |w|^2 = |p| along p."""
+    wind = BY_NAME["wind"]
+    assert wind.coefficients == ("pressure_x", "pressure_z") and wind.form("moving air") is MOVING_AIR
+    assert wind.model(np.array([0.3, -0.4]), context).terms == {"wind_pressure": {"pressure": (0.3, 0.0, -0.4)}}
+    change = MOVING_AIR.model(np.array([0.3, -0.4]), context)
+    assert change.fit == ("wind.velocity",)
+    params = change.terms["wind"]
+    velocity = np.array(params["velocity"])
+    assert velocity[1] == 0.0 and np.allclose(velocity / np.linalg.norm(velocity), [0.6, 0.0, -0.8])
+    assert params["coef"] * velocity @ velocity == pytest.approx(0.5)            # |p| = 0.5 Pa
+    sim, step = context.sim, context.batch.steps[0]
+    system = System(sim.num)
+    Wind(**params).assemble(step.x_prev, step, sim.num, system)      # x = x_prev: the cloth at rest
+    n = step.normal_prev
+    w_n = n @ velocity
+    assert np.allclose(-system.grad, (params["coef"] * sim.num.vertex_area * np.abs(w_n) * w_n)[:, None] * n)

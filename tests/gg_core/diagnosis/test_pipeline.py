@@ -1,11 +1,14 @@
 """Which candidates get a refit, and when a refit counts as confirmed."""
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
+from gg_core.diagnosis import pipeline
 from gg_core.diagnosis.confirm import Trial
-from gg_core.diagnosis.library import CANDIDATES
+from gg_core.diagnosis.library import BY_NAME, CANDIDATES, MOVING_AIR
 from gg_core.diagnosis.pipeline import (confirmed, implausible, judge_reference, propose, selected,
                                        usable_candidates)
 from gg_core.diagnosis.selection import Selection
@@ -114,3 +117,23 @@ def test_region_refits_outside_the_candidates_range_are_not_that_physics(sheet):
     assert "bending" in implausible(region("region_stiffness", stretch=1.0, bending=400.0), sheet)
     assert implausible(region("rest_length_region", rest=0.72), sheet) is None
     assert implausible(region("rest_length_region", rest=0.3), sheet) is not None
+
+
+def test_a_candidate_is_refitted_in_each_of_its_forms_and_the_training_rollouts_choose(monkeypatch):
+    """pipeline._trial_in_best_form: the wind's pressure and its moving-air form are both refitted; the one that
+    rolls the TRAINING sequences out better is kept, whatever the held-out rollouts say."""
+    wind, ctx = BY_NAME["wind"], SimpleNamespace(region=None)
+
+    def fake_trial(base, base_fit, chosen, *args):
+        moving = chosen[0][0].model is MOVING_AIR.model
+        return Trial(["wind"], heldout_l2=0.009 if moving else 0.005, train_loss=1.0,
+                     train_l2=train_l2["moving air" if moving else "pressure"])
+
+    monkeypatch.setattr(pipeline, "trial", fake_trial)
+    train_l2 = {"pressure": 0.008, "moving air": 0.007}
+    best = pipeline._trial_in_best_form(wind, np.array([0.1, 0.0]), None, ctx, [], [], None, None)
+    assert best.form == "moving air" and best.heldout_l2 == 0.009
+    train_l2 = {"pressure": 0.006, "moving air": 0.007}
+    assert pipeline._trial_in_best_form(wind, np.array([0.1, 0.0]), None, ctx, [], [], None, None).form == ""
+    mass = pipeline._trial_in_best_form(BY_NAME["mass_damping"], np.array([1.0]), None, ctx, [], [], None, None)
+    assert mass.form == ""                                       # no forms: its own model only
