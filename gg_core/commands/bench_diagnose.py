@@ -6,7 +6,10 @@ noise), and the answer is scored against truth.json, which the diagnosis never r
 (equivalences of gg_core/diagnosis/library.py), parameter errors where our parameter and Blender's mean the
 same thing, and held-out gains. The baseline every gain is measured against is the global-parameter simulator of
 the same run; "true effect" is the same simulator given the true effect's term (on the true region for region
-effects), refitted the same way, which gives the share of the reachable gain the diagnosis closed.
+effects), refitted the same way, which gives the share of the reachable gain the diagnosis closed (all of it, by
+construction, where the diagnosis named that term). On captures of our own simulator the "true model" is also
+rolled out: the capture's own material, terms and hidden effect, from the diagnosis's rest state at its substeps,
+which nothing fitted: the gain a diagnosis knowing the physics could reach from that rest state.
 
 Two sizes need no simulator of ours (gg_core/metrics/motion.py): the effect's `signal` (how differently its
 capture moves from the same seed's capture with nothing hidden) and its `step change` (how much that difference
@@ -33,10 +36,14 @@ import sys
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..diagnosis.blender_units import offset_tilt, truth_parameters
+from ..diagnosis.blender_units import offset_tilt, truth_parameters, wind_push
+
+if TYPE_CHECKING:
+    from ..stages.diagnose import DiagnoseRequest
 
 HELP = "missing-physics diagnosis on synthetic captures with hidden effects: confusion table, errors, gains"
 
@@ -136,6 +143,8 @@ def parameter_errors(truth: dict[str, object], values: dict[str, object] | None)
     values = dict(values or {})
     if "gravity_offset.delta_g" in values:
         values["gravity.tilt"] = offset_tilt(values["gravity_offset.delta_g"])
+    if (push := wind_push(values)) is not None:
+        values["wind.push"] = push
     for key, true in truth.items():
         if key not in values:
             continue
@@ -170,6 +179,33 @@ def region_overlap(report: dict, name: str | None, truth: np.ndarray | None) -> 
     return {"precision": float((found & true).sum() / found.sum()), "recall": float((found & true).sum() / true.sum())}
 
 
+def true_model_l2(request: DiagnoseRequest, report: dict) -> float | None:
+    """Held-out rollout error of the true model of a capture our simulator made (its material, terms and hidden
+    effect: truth.json) simulated as the diagnosis simulates, from the same rest state at the same substeps on the
+    same (noisy, smoothed) data: what the diagnosis could reach knowing the physics. None for Blender's captures
+    and for garments simulated on a remeshed copy (the true regions are on the recorded vertices)."""
+    from ..capture.layout import Capture
+    from ..diagnosis.resimulated import recorded_effect, true_simulator
+    from ..physics.fitting import mean_rollout_error
+    from ..stages.behavior import hand_mask
+    from ..stages.diagnose import prepare
+
+    capture = Path(request.capture)
+    truth = json.loads((capture / "truth.json").read_text())
+    if "ours" not in truth.get("effect", {}):
+        return None
+    inputs = prepare(request, Capture(capture), report["train_sequences"], report["heldout_sequences"],
+                     report["source"])
+    if inputs.mesh_log["remeshed"]:
+        return None
+    with np.load(capture / "gt" / "regions.npz") as z:
+        regions = {k: z[k] for k in z.files}
+    n_body = inputs.train[0].body.shape[1]
+    sim = true_simulator(inputs.rest, inputs.faces, inputs.attached, inputs.body_faces, n_body, hand_mask(n_body),
+                         recorded_effect(truth), regions, request.fps, request.substeps, flat=not request.rest_mesh)
+    return mean_rollout_error(sim, inputs.heldout, inputs.attached)
+
+
 def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, noise: float) -> dict:
     from ..diagnosis.library import BY_NAME, SYNTH_EFFECT_CLASS
     from ..stages.diagnose import DiagnoseRequest, run_diagnose
@@ -191,11 +227,12 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
                 region_path = str(project / "truth_region.npy")
                 project.mkdir(parents=True, exist_ok=True)
                 np.save(region_path, (z[region_name] > 0).astype(np.float64))
-    report = json.loads(run_diagnose(DiagnoseRequest(
-        capture=capture, project=project, noise_mm=noise, seed=seed, bootstrap=args.bootstrap,
-        fit_horizon=args.fit_horizon,
-        reference=reference, reference_region=region_path,
-        rest_mesh=str(capture / "gt" / "template.obj") if args.rest_given else "", progress="none")).read_text())
+    request = DiagnoseRequest(capture=capture, project=project, noise_mm=noise, seed=seed, bootstrap=args.bootstrap,
+                              fit_horizon=args.fit_horizon, reference=reference, reference_region=region_path,
+                              rest_mesh=str(capture / "gt" / "template.obj") if args.rest_given else "",
+                              progress="none")
+    report = json.loads(run_diagnose(request).read_text())
+    true_model = true_model_l2(request, report)
     predicted = report["accepted_classes"][0] if report["accepted_classes"] else "none"
     accepted = next((e for e in report["effects"] if report["accepted"] and e["name"] == report["accepted"][0]),
                     None)
@@ -217,6 +254,9 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         else accepted["cross_validated"]["heldout_gain"],
         "true_effect_l2": None if ref is None else ref["heldout_l2"],
         "gap_closed": None if gap is None or gap <= 0 else (before - after) / gap,
+        "true_model_l2": true_model,
+        "true_model_gap_closed": None if true_model is None or before <= true_model
+        else (before - after) / (before - true_model),
         "true_parameters": true_params,
         "parameter_error": parameter_error(true_params, named_refit),
         "parameter_errors": parameter_errors(true_params, named_refit),
@@ -236,6 +276,7 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
     gains = [c["heldout_gain"] for c in present if c["correct"]]
     cv_gains = [c["cross_validated_gain"] for c in present if c["correct"] and c["cross_validated_gain"] is not None]
     closed = [c["gap_closed"] for c in present if c["gap_closed"] is not None]
+    closed_to_truth = [c["true_model_gap_closed"] for c in present if c.get("true_model_gap_closed") is not None]
     overruled = [c for c in cases if c["rollouts_first"]]
 
     def mean(xs: list[float]) -> float | None:
@@ -260,6 +301,7 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
             "mean_heldout_gain_when_named": mean(gains),
             "mean_cross_validated_gain_when_named": mean(cv_gains),
             "median_gap_closed": float(np.median(closed)) if closed else None,
+            "median_true_model_gap_closed": float(np.median(closed_to_truth)) if closed_to_truth else None,
             "residual_tie_breaks": len(overruled),
             "residual_tie_breaks_right": sum(c["correct"] for c in overruled)}
 
@@ -291,6 +333,8 @@ def run(args: argparse.Namespace) -> int:
                              f" (the rollouts led with {case['rollouts_first']}, the residual chose)")
                           + ("" if case["true_effect_l2"] is None else
                              f", true effect {case['true_effect_l2'] * 1e3:.1f} mm")
+                          + ("" if case["true_model_l2"] is None else
+                             f", true model {case['true_model_l2'] * 1e3:.1f} mm")
                           + f"; motion change {case['signal_mm']:.1f} mm, {case['step_change_mm']:.1f} mm "
                             "of it moves at twice the steps", file=sys.stderr, flush=True)
     for noise in args.noise_mm:

@@ -305,8 +305,8 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     if len(passing) > 1 and BY_NAME[passing[0]].equivalence != BY_NAME[passing[1]].equivalence and one_region:
         pair = fit(gram(design), passing[:2], BY_NAME).coefs
         region = pair_regions[0] if pair_regions else None
-        joint = trial(sim, BASELINE_FIT, [(BY_NAME[n], pair[n]) for n in passing[:2]], replace(ctx, region=region),
-                      region, train, heldout, attached, refit_config)
+        joint = trial(sim, BASELINE_FIT, [(in_form(BY_NAME[n], trials[n].form), pair[n]) for n in passing[:2]],
+                      replace(ctx, region=region), region, train, heldout, attached, refit_config)
         joint_name = "+".join(passing[:2])
         trials[joint_name] = joint
         if why := implausible(joint, sim.cloth):
@@ -476,13 +476,19 @@ def _trial_in_best_form(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulat
     capture with hidden moving air (skirt, seed 1, 0.7 m/s along x; the stored baseline fit, held-out arm swing
     8.8 mm): a pressure along x rolls out at best 5.2 mm (0.05 Pa), air moving along x 4.4 mm (0.4 m/s)."""
     best = None
-    for form in (None, *cand.forms):
-        t = trial(sim, BASELINE_FIT, [(cand if form is None else replace(cand, model=form.model), coefs)], ctx,
-                  ctx.region, train, heldout, attached, config)
-        t.form = "" if form is None else form.label
+    for label in ("", *(f.label for f in cand.forms)):
+        t = trial(sim, BASELINE_FIT, [(in_form(cand, label), coefs)], ctx, ctx.region, train, heldout, attached,
+                  config)
+        t.form = label
         if best is None or t.train_l2 < best.train_l2:
             best = t
     return best
+
+
+def in_form(cand: Candidate, label: str) -> Candidate:
+    """`cand` with the model of its form `label` ("" or a label it lacks: its own model)."""
+    form = cand.form(label)
+    return cand if form is None else replace(cand, model=form.model)
 
 
 def _candidate_rows(contexts: dict[str, Context], pooling: Pooling, predicted: np.ndarray, acceleration: float

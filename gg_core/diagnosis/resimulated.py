@@ -41,7 +41,7 @@ from ..physics.simulator import ClothState, ImplicitSimulator
 from ..physics.solver import SolverOptions
 from ..storage import write_json
 from ..synth.effects import GRAVITY, resolve_effect
-from .blender_units import truth_parameters
+from .blender_units import truth_parameters, wind_push
 from .library import apply_region
 from .pipeline import BASELINE_TERMS
 
@@ -95,7 +95,8 @@ def our_effect(name: str, assignments: list[str], reference_truth: dict) -> tupl
     elif name == "wind":
         field_ = resolved.blender["force_fields"][0]
         velocity = np.asarray(field_["direction"], np.float64) * WIND_SPEED_PER_STRENGTH * float(p["strength"])
-        ours = OurEffect({"wind": {"velocity": tuple(velocity)}}, parameters={"wind.velocity": velocity.tolist()})
+        ours = OurEffect({"wind": {"velocity": tuple(velocity)}}, parameters={"wind.push": wind_push(
+            {"wind.velocity": velocity, "material.density": TRUE_MATERIAL["density"]})})
     elif name == "none":
         ours = OurEffect()
     else:
@@ -104,12 +105,19 @@ def our_effect(name: str, assignments: list[str], reference_truth: dict) -> tupl
     return resolved.to_json(), ours
 
 
+def recorded_effect(truth: dict) -> OurEffect:
+    """The hidden effect a re-simulated capture's truth.json records (resimulate)."""
+    ours = truth["effect"]["ours"]
+    return OurEffect(ours["terms"], ours["region"], ours["region_log_scales"], truth.get("true_parameters", {}))
+
+
 def true_simulator(template: np.ndarray, faces: np.ndarray, pinned: np.ndarray, body_faces: np.ndarray,
                    n_body: int, hands: np.ndarray | None, effect: OurEffect, regions: dict[str, np.ndarray],
-                   fps: float, substeps: int) -> ImplicitSimulator:
+                   fps: float, substeps: int, flat: bool = False) -> ImplicitSimulator:
     """Our simulator with TRUE_MATERIAL, the diagnosis's baseline terms at TRUE_TERMS and the effect; the rest
-    shape is the garment template (unloaded), as Blender's is."""
-    cloth = Cloth(template, faces, pinned=pinned, material=Material.uniform(len(template), **TRUE_MATERIAL))
+    shape is `template`: the garment unloaded, as Blender's is, bending towards its own angles (or towards flat)."""
+    cloth = Cloth(template, faces, pinned=pinned, material=Material.uniform(len(template), **TRUE_MATERIAL),
+                  flat=flat)
     if effect.region is not None:
         with torch.no_grad():
             apply_region(cloth, (regions[effect.region] > 0).astype(np.float64), effect.region_logs)

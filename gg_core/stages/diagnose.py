@@ -37,6 +37,7 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -49,6 +50,9 @@ from ..parallel import check_workers
 from ..storage import atomic_path, file_stamps, write_json, write_report
 from .behavior import attached_vertices, hand_mask, split
 from .motion import SIM_VERTICES, garment_files, inputs_key, load_sequence, resolve_source, simulation_mesh
+
+if TYPE_CHECKING:
+    from ..physics.fitting import Observed
 
 STAGE = "diagnose"
 DENOISE = ("auto", "on", "off")
@@ -180,6 +184,38 @@ def rest_state(req: DiagnoseRequest, first_frame: np.ndarray, mesh_log: dict) ->
     return vertices
 
 
+@dataclass
+class Inputs:
+    """What the diagnosis simulates and compares with: the loaded (noisy, smoothed) sequences, the simulation
+    mesh, the attached garment vertices and the rest positions."""
+
+    train: list[Observed]
+    heldout: list[Observed]
+    faces: np.ndarray
+    body_faces: np.ndarray
+    attached: np.ndarray
+    rest: np.ndarray
+    mesh_log: dict
+    denoised: Denoising
+
+
+def prepare(req: DiagnoseRequest, capture: Capture, train_names: list[str], heldout_names: list[str],
+            source: str) -> Inputs:
+    """Load, add the requested noise, smooth where noisy, pick the simulation mesh, attached vertices and rest
+    state: the same for the stage and for benchmarks that roll a known model out on the same data."""
+    loaded = load(req, capture, train_names + heldout_names, source)
+    train = [loaded[n][0] for n in train_names]
+    heldout = [loaded[n][0] for n in heldout_names]
+    faces, mesh_log = simulation_mesh(train + heldout, loaded[train_names[0]][1], req.sim_vertices)
+    body_faces = loaded[train_names[0]][2]
+    denoised = denoise(req, loaded)
+    # noise moves attached vertices too: widen the tolerance by four standard deviations
+    noise_mm = max(req.noise_mm, denoised.level_mm if denoised.smoothed else 0.0)
+    attached = attached_vertices(train, body_faces, (req.attach_tol_mm + 4 * noise_mm) * 1e-3)
+    return Inputs(train, heldout, faces, body_faces, attached, rest_state(req, train[0].garment[0], mesh_log),
+                  mesh_log, denoised)
+
+
 def run_diagnose(req: DiagnoseRequest) -> Path:
     if req.denoise not in DENOISE:
         raise InputError(f"unknown denoise mode '{req.denoise}'", "--denoise", f"choose one of: {', '.join(DENOISE)}")
@@ -203,20 +239,14 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     from ..diagnosis.pipeline import diagnose  # noqa: PLC0415 - torch only when the stage runs
     from ..diagnosis.report import write_html  # noqa: PLC0415
 
-    loaded = load(req, capture, train_names + heldout_names, source)
-    train = [loaded[n][0] for n in train_names]
-    heldout = [loaded[n][0] for n in heldout_names]
-    faces, mesh_log = simulation_mesh(train + heldout, loaded[train_names[0]][1], req.sim_vertices)
-    body_faces = loaded[train_names[0]][2]
-    denoised = denoise(req, loaded)
-    # noise moves attached vertices too: widen the tolerance by four standard deviations
-    noise_mm = max(req.noise_mm, denoised.level_mm if denoised.smoothed else 0.0)
-    attached = attached_vertices(train, body_faces, (req.attach_tol_mm + 4 * noise_mm) * 1e-3)
+    inputs = prepare(req, capture, train_names, heldout_names, source)
+    train, heldout, faces = inputs.train, inputs.heldout, inputs.faces
     reference_region = np.load(req.reference_region) if req.reference_region else None
-    rest = rest_state(req, train[0].garment[0], mesh_log)
-    result = diagnose(req, train, heldout, faces, body_faces, attached, hand_mask(train[0].body.shape[1]),
-                      reference_region, rest, Progress(STAGE, 10 + req.max_trials + len(req.reference)
-                                                      + len(train) * (1 + req.fold_finalists), req.progress))
+    result = diagnose(req, train, heldout, faces, inputs.body_faces, inputs.attached,
+                      hand_mask(train[0].body.shape[1]), reference_region, inputs.rest,
+                      Progress(STAGE, 10 + req.max_trials + len(req.reference) + len(train) * (1 + req.fold_finalists),
+                               req.progress))
+    mesh_log, denoised = inputs.mesh_log, inputs.denoised
 
     out = project / "diagnose"
     for name, values in (("residual_vertex", result.localization.vertex_map),
@@ -229,7 +259,7 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     payload.update({
         "train_sequences": train_names, "heldout_sequences": heldout_names, "source": source,
         "noise_mm": req.noise_mm, "denoising": denoised.to_json(), "vertices": len(train[0].garment[0]),
-        "simulation_mesh": mesh_log, "attached_vertices": int(attached.sum()),
+        "simulation_mesh": mesh_log, "attached_vertices": int(inputs.attached.sum()),
         "rest_state": req.rest_mesh or f"first frame of {train_names[0]}, bending towards flat",
         "outputs": {"residual_vertex": str(out / "residual_vertex.npy"),
                     "residual_vertex_unit": "m/s^2 (one-frame position error over the frame time squared)",

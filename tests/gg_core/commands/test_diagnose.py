@@ -18,7 +18,10 @@ from diagnosis_helpers import write_blender_layout_capture, write_sim_capture  #
 from gg_core.cli import main  # noqa: E402
 from gg_core.commands.bench_diagnose import (capture_of, case_name, confusion, effect_params,  # noqa: E402
                                              parameter_error, parameter_errors, region_overlap, summarize,
-                                             truth_parameters)
+                                             true_model_l2, truth_parameters)
+from gg_core.diagnosis.blender_units import WIND_COEF  # noqa: E402
+from gg_core.physics.forces import TERMS  # noqa: E402
+from gg_core.stages.diagnose import DiagnoseRequest  # noqa: E402
 
 
 def test_the_command_line_defaults_are_the_requests_and_parsing_imports_no_torch(tmp_path):
@@ -99,6 +102,18 @@ def test_bench_scoring():
     ours = truth_parameters({"effect": {"name": "friction", "params": {"friction": 60.0},
                                         "ours": {"terms": {"body_friction": {"mu": 1.05}}}}})
     assert ours == {"body_friction.mu": 1.05}                             # our simulator's own coefficient
+    wind = truth_parameters({"effect": {"name": "wind", "params": {"strength": 1000.0},
+                                        "ours": {"terms": {"wind": {"velocity": [0.7, 0.0, 0.0]}}}},
+                             "material": {"ours": {"material": {"density": 0.15}}}})
+    assert wind == {"wind.push": [pytest.approx(0.6 * 0.49 / 0.15), 0.0, 0.0]}   # face-on, at rest, per unit mass
+    # a lighter fitted cloth needs slower air for the same push: the speed is not what the data fix
+    lighter = {"wind.velocity": [0.7 * np.sqrt(0.9 * 0.05 / 0.15), 0.0, 0.0], "material.density": 0.05}
+    assert parameter_error(wind, lighter) == pytest.approx(0.1)
+    pressure = {"wind_pressure.pressure": [0.0, 0.0, 0.6 * 0.49 / 3], "material.density": 0.05}  # the same push, but
+    assert parameter_error(wind, pressure) == pytest.approx(np.sqrt(2))                        # along z, not x
+    assert parameter_error(wind, {"wind.velocity": [0.7, 0.0, 0.0]}) is None                    # no density refitted
+    assert truth_parameters({"effect": {"name": "wind", "params": {"strength": 1000.0}}}) == {}   # Blender's
+    assert WIND_COEF == TERMS["wind"].defaults["coef"]
     patch = truth_parameters({"effect": {"name": "stiff_patch", "params": {"factor": 30.0}}})
     refit = {"region.stretch_scale": 0.16, "region.bending_scale": 23.9}     # our simulator's patch, seed 2
     assert parameter_errors(patch, refit) == {"region.stretch_scale": pytest.approx(29.84 / 29),
@@ -109,7 +124,7 @@ def test_bench_scoring():
               "resolved_by_reference": False, "rollouts_first": None},
              {"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
               "cross_validated_gain": 0.3, "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01, "true_effect_l2": 0.006,
-              "resolved_by_reference": True, "rollouts_first": "wind"},
+              "resolved_by_reference": True, "rollouts_first": "wind", "true_model_gap_closed": 0.7},
              {"true_class": "wind", "predicted": "gravity", "correct": False, "heldout_gain": 0.1,
               "cross_validated_gain": 0.2, "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": 0.0095,
               "resolved_by_reference": False, "rollouts_first": None}]
@@ -120,6 +135,7 @@ def test_bench_scoring():
     # nor does the reference resolve it: at twice Blender's steps it changes by more than itself
     assert summary["cases_resolved_by_reference"] == 1 and summary["accuracy_resolved_by_reference"] == 1.0
     assert summary["median_parameter_error"] == pytest.approx(0.1) and summary["median_gap_closed"] == 0.6
+    assert summary["median_true_model_gap_closed"] == 0.7      # only captures of our simulator have a true model
     assert summary["mean_cross_validated_gain_when_named"] == pytest.approx(0.3)   # the wrongly named one not
     assert summary["residual_tie_breaks"] == 1 and summary["residual_tie_breaks_right"] == 1   # rollouts: wind
     table = confusion(cases).splitlines()
@@ -138,6 +154,15 @@ def test_bench_captures_of_our_simulator_resimulate_the_blender_reference_of_the
     truth = json.loads((capture / "truth.json").read_text())
     assert truth["true_parameters"] == {"mass_damping.alpha": pytest.approx(10.0)}
     assert truth["material"]["ours"]["substeps"] == 4 and reference.name in truth["generator"]
+    # the true model rolled out as the diagnosis simulates (its rest state and substeps): close to the recording,
+    # closer than without the hidden damping; Blender's captures have no true model of ours
+    report = {"train_sequences": ["a", "b"], "heldout_sequences": ["c"], "source": "gt"}
+    request = DiagnoseRequest(capture=capture, project=tmp_path / "p")
+    error = true_model_l2(request, report)
+    undamped = truth | {"effect": truth["effect"] | {"ours": {"terms": {}, "region": None, "region_log_scales": {}}}}
+    (capture / "truth.json").write_text(json.dumps(undamped))
+    assert 0.0 < error < true_model_l2(request, report)
+    assert true_model_l2(DiagnoseRequest(capture=reference, project=tmp_path / "q"), report) is None
 
 
 def test_region_overlap_scores_where_a_region_effect_was_placed():

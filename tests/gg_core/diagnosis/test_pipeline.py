@@ -137,3 +137,4 @@ def test_a_candidate_is_refitted_in_each_of_its_forms_and_the_training_rollouts_
     assert pipeline._trial_in_best_form(wind, np.array([0.1, 0.0]), None, ctx, [], [], None, None).form == ""
     mass = pipeline._trial_in_best_form(BY_NAME["mass_damping"], np.array([1.0]), None, ctx, [], [], None, None)
     assert mass.form == ""                                       # no forms: its own model only
+    assert pipeline.in_form(wind, "moving air").model is MOVING_AIR.model and pipeline.in_form(wind, "") is wind

@@ -36,7 +36,7 @@ def test_blender_effects_become_our_terms_in_our_units():
     assert shrink.region == "side_seam" and shrink.region_logs == {"rest": pytest.approx(np.log(0.8))}
     _, wind = our_effect("wind", ["azimuth_deg=90"], BLENDER_TRUTH)
     assert np.allclose(wind.terms["wind"]["velocity"], [0.0, 0.0, 0.7], atol=1e-12)
-    assert np.allclose(wind.parameters["wind.velocity"], [0.0, 0.0, 0.7], atol=1e-12)   # scored: moving air
+    assert np.allclose(wind.parameters["wind.push"], [0.0, 0.0, 0.6 * 0.49 / 0.15], atol=1e-12)   # per unit mass
     with pytest.raises(InputError):
         our_effect("magnetism", [], BLENDER_TRUTH)
 
