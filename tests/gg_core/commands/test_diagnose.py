@@ -123,10 +123,12 @@ def test_bench_scoring():
               "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": None,
               "resolved_by_reference": False, "rollouts_first": None},
              {"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
-              "cross_validated_gain": 0.3, "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01, "true_effect_l2": 0.006,
+              "cross_validated_gain": 0.3, "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01,
+              "true_effect_l2": 0.006,
               "resolved_by_reference": True, "rollouts_first": "wind", "true_model_gap_closed": 0.7},
              {"true_class": "wind", "predicted": "gravity", "correct": False, "heldout_gain": 0.1,
-              "cross_validated_gain": 0.2, "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": 0.0095,
+              "cross_validated_gain": 0.2, "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01,
+              "true_effect_l2": 0.0095,
               "resolved_by_reference": False, "rollouts_first": None}]
     summary = summarize(cases, min_gain=0.1)
     assert summary["accuracy_effect_present"] == 0.5 and summary["false_alarm_rate_none"] == 0.0
