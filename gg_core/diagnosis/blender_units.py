@@ -69,9 +69,9 @@ def wind_push(values: dict[str, object]) -> list[float] | None:
     |p| p-hat / density for a pressure p, coef |w| w / density for air moving at w (library.MOVING_AIR); None
     without a wind or a density.
 
-    Why this and not the pressure or the air speed: every force of the model scales with the density but gravity,
-    so the data fix forces per unit mass, and the fitted density is free to drift (measured: 0.015-0.053 kg/m^2
-    over the folds of one capture whose true density is 0.15). With the drag coefficient held at its default, a
+    Why this and not the pressure or the air speed: weight and inertia both scale with the density, so the motion
+    fixes the other forces only per unit mass (stiffness, wind), and the fitted density drifts with them (measured:
+    0.015-0.053 kg/m^2 over the folds of one capture whose true density is 0.15). With the drag coefficient held at its default, a
     lighter cloth then needs slower air: on our simulator's hidden wind (0.7 m/s, seed 1) the refitted speed was
     0.35 m/s (50 % off) and the push 1.70 against 1.96 m/s^2."""
     density = values.get("material.density")
