@@ -453,7 +453,13 @@ def _trial_from_starts(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulato
     started at zero drag stays there. Measured on the benchmark's hidden air damping (seed 1, noise 0): the
     baseline's internal damping rose to a loss factor of 0.91 and the one-frame regression gave mass damping
     nothing; its trial kept alpha at the default 1 /s and gained 0 %, where the same refit from the probe size
-    reached 10.3 /s and gained 24.5 % held-out and training."""
+    reached 10.3 /s and gained 24.5 % held-out and training.
+
+    Measured and not kept (session 27): also restarting the baseline's internal damping where it ends at its limit
+    (our simulator's hidden moving air, seed 2, fitted without the walk: tau 0.159 s, the truth 0.03 s; the walk held
+    out 7.51 mm). The wind trial as moving air from the baseline's damping rolled the training sequences out 5.54 mm
+    and the walk 6.97 mm; from tau 0.04 s 5.29 / 7.99 mm, from 0.016 s 5.75 / 6.62 mm: the training rollouts
+    would choose the start that is worst held out."""
     start = _trial_in_best_form(cand, coefs, sim, ctx, train, heldout, attached, config)
     if np.any(coefs != 0):
         return start
