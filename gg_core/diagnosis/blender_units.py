@@ -71,9 +71,9 @@ def wind_push(values: dict[str, object]) -> list[float] | None:
 
     Why this and not the pressure or the air speed: weight and inertia both scale with the density, so the motion
     fixes the other forces only per unit mass (stiffness, wind), and the fitted density drifts with them (measured:
-    0.015-0.053 kg/m^2 over the folds of one capture whose true density is 0.15). With the drag coefficient held at its default, a
-    lighter cloth then needs slower air: on our simulator's hidden wind (0.7 m/s, seed 1) the refitted speed was
-    0.35 m/s (50 % off) and the push 1.70 against 1.96 m/s^2."""
+    0.015-0.053 kg/m^2 over the folds of one capture whose true density is 0.15). With the drag coefficient held
+    at its default, a lighter cloth then needs slower air: on our simulator's hidden wind (0.7 m/s, seed 1) the
+    refitted speed was 0.35 m/s (50 % off) and the push 1.70 against 1.96 m/s^2."""
     density = values.get("material.density")
     if density is None:
         return None
