@@ -98,7 +98,8 @@ class GG_OT_load_registration(_Loader):
         folders = sorted(p for p in (project / "stage2").glob("*/meshes") if any(p.glob("*.ply")))
         if not folders:
             raise InputError("no registered frames", project / "stage2", "run Register Sequences first")
-        loaded = [self._sequence(scene, folder.parent.name, sorted(folder.glob("*.ply")), project) for folder in folders]
+        loaded = [self._sequence(scene, folder.parent.name, sorted(folder.glob("*.ply")), project)
+                  for folder in folders]
         return f"registered garment: {len(loaded)} sequence(s), {sum(loaded)} frames"
 
     @staticmethod
@@ -121,7 +122,8 @@ class GG_OT_load_registration(_Loader):
         obj["gg_result"] = f"{name}_garment"
         obj["gg_sequence"] = name
         if len(positions) > 1:
-            add_mesh_cache(obj, positions, project / "blender" / f"{name}_garment.pc2", frame_start, "Registered Motion")
+            add_mesh_cache(obj, positions, project / "blender" / f"{name}_garment.pc2", frame_start,
+                           "Registered Motion")
         _replace_object(obj, collection if collection is not None else _results_collection(scene))
         return len(files)
 

@@ -117,9 +117,11 @@ def _matrix(value: object, shape: tuple[int, int], name: str, where: str) -> np.
     try:
         m = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise InputError(f"{name} is not a numeric matrix", where, f"write {name} as a {shape[0]}x{shape[1]} list") from None
+        raise InputError(f"{name} is not a numeric matrix", where,
+                         f"write {name} as a {shape[0]}x{shape[1]} list") from None
     if m.shape != shape:
-        raise InputError(f"{name} has shape {m.shape}, expected {shape}", where, f"write {name} as {shape[0]}x{shape[1]}")
+        raise InputError(f"{name} has shape {m.shape}, expected {shape}", where,
+                         f"write {name} as {shape[0]}x{shape[1]}")
     if not np.isfinite(m).all():
         raise InputError(f"{name} contains NaN or infinite values", where, "re-export the calibration")
     return m

@@ -104,7 +104,8 @@ class Capture:
                 if p.is_dir() and (p / "cameras.json").exists()}
         if not seqs:
             raise InputError("no sequence found (no <sequence>/cameras.json)", self.root,
-                             "point to a capture folder in the layout of REFERENCE.md §1, or import one with `gg import`")
+                             "point to a capture folder in the layout of REFERENCE.md §1, "
+                             "or import one with `gg import`")
         return seqs
 
     def sequence(self, name: str) -> Sequence:

@@ -99,7 +99,8 @@ class Cloth:
             self.material = Material.uniform(self.n_vertices)
         if self.rest_lengths is None:
             e = self.topology.edges
-            self.rest_lengths = torch.from_numpy(np.linalg.norm(self.template[e[:, 0]] - self.template[e[:, 1]], axis=1))
+            lengths = np.linalg.norm(self.template[e[:, 0]] - self.template[e[:, 1]], axis=1)
+            self.rest_lengths = torch.from_numpy(lengths)
         if self.pinned is None:
             self.pinned = np.zeros(self.n_vertices, bool)
 
@@ -166,7 +167,8 @@ class Cloth:
         tr = basis.diagonal(dim1=-2, dim2=-1).sum(-1)                                    # [F,3]
         trbb = torch.einsum("fkab,flba->fkl", basis, basis)
         vol = self.thickness * area
-        c = vol[:, None, None] * (mu_f[:, None, None] * trbb + 0.5 * lam_f[:, None, None] * tr[:, :, None] * tr[:, None, :])
+        c = vol[:, None, None] * (mu_f[:, None, None] * trbb
+                                  + 0.5 * lam_f[:, None, None] * tr[:, :, None] * tr[:, None, :])
         vertex_area = torch.from_numpy(vertex_areas(self.template, topo.faces))
         hinge_faces = torch.from_numpy(topo.hinge_faces)
         hinges = torch.from_numpy(topo.hinges)
@@ -190,7 +192,8 @@ class Cloth:
             return np.ascontiguousarray(t.detach().numpy(), dtype=np.float64)
 
         return Numeric(faces=topo.faces, edges=topo.edges, hinges=topo.hinges, pairs=pairs,
-                       face_pairs=topo.face_edges, hinge_pairs=hinge_pairs, sweep=self.sweep, face_rest_sq=np64(rest.face_rest_sq),
+                       face_pairs=topo.face_edges, hinge_pairs=hinge_pairs, sweep=self.sweep,
+                       face_rest_sq=np64(rest.face_rest_sq),
                        face_area=np64(rest.face_area), strain_basis=np64(rest.strain_basis),
                        stretch_c=np64(rest.stretch_c), mass=np64(rest.mass), vertex_area=np64(rest.vertex_area),
                        hinge_coef=np64(rest.hinge_coef), rest_angle=np64(rest.rest_angle),

@@ -129,7 +129,8 @@ class Collision(Term):
         g = np.maximum(gap, 0.0) * step.contact_active
         k = self.p("stiffness") * num.vertex_area
         if system is not None:
-            system.add_vertex(-(3 * k * g * g)[:, None] * n, hess=(6 * k * g)[:, None, None] * n[:, :, None] * n[:, None, :])
+            system.add_vertex(-(3 * k * g * g)[:, None] * n,
+                              hess=(6 * k * g)[:, None, None] * n[:, :, None] * n[:, None, :])
         return float((k * g ** 3).sum())
 
     def normal_force(self, signed_distance: np.ndarray, vertex_area: np.ndarray) -> np.ndarray:

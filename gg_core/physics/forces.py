@@ -231,7 +231,8 @@ class AnisotropicStretch(Term):
         bu, bv = self._betas(rest.strain_basis, rest.template, rest.faces)
         q = face_q(x, rest.faces, rest.face_rest_sq)
         vol = rest.thickness * rest.face_area
-        return (vol * (self.params["k_warp"] * (q * bu).sum(-1) ** 2 + self.params["k_weft"] * (q * bv).sum(-1) ** 2)).sum(-1)
+        warp, weft = (q * bu).sum(-1) ** 2, (q * bv).sum(-1) ** 2
+        return (vol * (self.params["k_warp"] * warp + self.params["k_weft"] * weft)).sum(-1)
 
     def assemble(self, x, step, num, system):
         bu, bv = self._betas(num.strain_basis, num.template, num.faces)

@@ -94,7 +94,8 @@ def test_exit_code_2_gives_the_error_line(jobs):
     """)
     result = job.run_to_end()
     assert result.returncode == 2 and not result.cancelled
-    assert result.error_line == "gg: error: capture folder not found, /nowhere, pass the folder that holds the sequences"
+    assert result.error_line == ("gg: error: capture folder not found, /nowhere, "
+                                 "pass the folder that holds the sequences")
 
 
 def test_crash_reports_the_last_stderr_line(jobs):

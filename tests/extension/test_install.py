@@ -39,7 +39,8 @@ def test_zip_installs_enables_and_imports(small_capture, tmp_path):
     assert found["collections"] == ["seq0"] and found["cameras"] == ["cam00", "cam01", "cam02"]
     # Nothing is written into the add-on folder: the body cache goes to the extension's user folder.
     cache = Path(found["body_cache"])
-    assert cache.is_file() and cache.is_relative_to(user / "extensions" / ".user" / "user_default" / "gaussian_garments")
+    assert cache.is_file()
+    assert cache.is_relative_to(user / "extensions" / ".user" / "user_default" / "gaussian_garments")
     assert (found["job"], found["job_result"]) == (["FINISHED"], "gg inspect: done")
 
 

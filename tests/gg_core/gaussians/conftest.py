@@ -10,7 +10,8 @@ import pytest
 
 def _load_reference() -> ModuleType:
     # tests run with --import-mode=importlib (no sys.path entry), so load the helper by path
-    spec = importlib.util.spec_from_file_location("gg_tests_gaussians_reference", Path(__file__).with_name("reference.py"))
+    spec = importlib.util.spec_from_file_location("gg_tests_gaussians_reference",
+                                                  Path(__file__).with_name("reference.py"))
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

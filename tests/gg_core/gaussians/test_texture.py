@@ -98,4 +98,5 @@ def test_one_gaussian_per_face(sphere):
 def test_uv_layout_outside_the_texture_is_an_input_error():
     verts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
     with pytest.raises(InputError, match="covers no texel"):
-        tex.build_texture(verts, np.array([[0, 1, 2]]), resolution=8, uvs=verts[:, :2] + 5, face_uvs=np.array([[0, 1, 2]]))
+        tex.build_texture(verts, np.array([[0, 1, 2]]), resolution=8, uvs=verts[:, :2] + 5,
+                          face_uvs=np.array([[0, 1, 2]]))

@@ -68,7 +68,8 @@ def test_gravity_offset_adds_acceleration():
     np.testing.assert_allclose(accel, np.array(GRAVITY) + [1.0, 0.0, 0.0], atol=1e-3)
 
 
-@pytest.mark.parametrize("term,params", [("strain_rate_damping", {"beta": 1.0}), ("viscoelastic_damping", {"tau": 0.1})])
+@pytest.mark.parametrize("term,params", [("strain_rate_damping", {"beta": 1.0}),
+                                         ("viscoelastic_damping", {"tau": 0.1})])
 def test_damping_terms_do_not_act_on_rigid_motion(term, params):
     """Internal damping resists deformation only: a rigidly falling sheet accelerates at g."""
     vel, fps = _fall([term], {term: params}, seconds=1.0)

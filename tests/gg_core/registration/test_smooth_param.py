@@ -9,7 +9,8 @@ from gg_core.registration.smooth_param import SmoothParam, UniformAdam, smoothin
 
 def strip() -> tuple[np.ndarray, np.ndarray]:
     verts = np.array([[i * 0.1, j * 0.1, 0.0] for i in range(4) for j in range(2)])
-    faces = np.array([[2 * i, 2 * i + 2, 2 * i + 3] for i in range(3)] + [[2 * i, 2 * i + 3, 2 * i + 1] for i in range(3)])
+    faces = np.array([[2 * i, 2 * i + 2, 2 * i + 3] for i in range(3)]
+                     + [[2 * i, 2 * i + 3, 2 * i + 1] for i in range(3)])
     return verts, faces
 
 
