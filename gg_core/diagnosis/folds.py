@@ -136,9 +136,9 @@ class CrossValidation:
         return bool(both) and all(min(f.gains(first)[:2]) > min(f.gains(other)[:2]) for f in both)
 
     def residual_tie_break(self, ranked: list[str], evidence: list[str]) -> list[str]:
-        """`ranked` with its first place given to the candidate the residual regression ranks higher (`evidence`:
-        chosen by the forward selection first, then by the share explained alone) where the folds do not
-        separate that candidate from the rollouts' first.
+        """`ranked` with its first place given to the candidate the residual regression ranks higher (`evidence`,
+        in the regression's order; the diagnosis passes only what it selected, pipeline.named_first) where the
+        folds do not separate that candidate from the rollouts' first.
 
         Why: rollouts judge how much a term helps, the one-step residual what pattern of force is missing, and
         only the residual sees the pattern. Wind pressure and a gravity tilt both push a skirt sideways and roll

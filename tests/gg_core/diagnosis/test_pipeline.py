@@ -9,7 +9,8 @@ import pytest
 from gg_core.diagnosis import pipeline
 from gg_core.diagnosis.confirm import Trial
 from gg_core.diagnosis.library import BY_NAME, CANDIDATES, MOVING_AIR
-from gg_core.diagnosis.pipeline import (confirmed, implausible, judge_reference, propose, selected,
+from gg_core.diagnosis.folds import CrossValidation, Fold
+from gg_core.diagnosis.pipeline import (confirmed, implausible, judge_reference, named_first, propose, selected,
                                        usable_candidates)
 from gg_core.diagnosis.selection import Selection
 from gg_core.physics.cloth import Cloth
@@ -31,6 +32,26 @@ def test_candidates_are_tried_only_when_selected_often_enough():
     sel = Selection(1.0, ["gravity_offset", "air_drag"], {}, {}, {},
                     inclusion={"gravity_offset": 0.7, "air_drag": 0.3})
     assert selected(sel, 0.5) == ["gravity_offset"]
+
+
+def test_only_a_candidate_the_selection_chose_can_break_the_folds_tie():
+    # our simulator's hidden tilt at 1.5 mm noise (session 28), per fold (held-out, training) rollout errors: the
+    # tilt leads the rollouts but loses the walk-less fold, so the folds do not separate it from wind
+    folds = [Fold(["a", "b"], [held], Trial([], ref[0], 1.0, ref[1]),
+                  {n: Trial([n], h, 1.0, t) for n, (h, t) in trials.items()})
+             for held, ref, trials in [
+                 ("arm", (0.01204, 0.01422), {"wind": (0.00813, 0.00991), "gravity_offset": (0.0052, 0.00732)}),
+                 ("walk", (0.01401, 0.01188), {"wind": (0.01255, 0.00806), "gravity_offset": (0.01393, 0.01099)}),
+                 ("twist", (0.01216, 0.01258), {"wind": (0.00818, 0.0092), "gravity_offset": (0.00604, 0.0072)})]]
+    cv = CrossValidation(folds)
+    by_rollouts = cv.ranked(["wind", "gravity_offset"])
+    assert by_rollouts == ["gravity_offset", "wind"]
+    explained = {"wind": 0.074, "gravity_offset": 0.071}
+    unstable = Selection(1.0, ["wind"], explained, {}, {}, inclusion={"wind": 0.4, "gravity_offset": 0.3})
+    assert named_first(cv, by_rollouts, unstable, 0.5) == ["gravity_offset", "wind"]
+    assert cv.residual_tie_break(by_rollouts, propose(unstable, 0.5, 12))[0] == "wind"    # the explained share would
+    stable = Selection(1.0, ["wind"], explained, {}, {}, inclusion={"wind": 1.0, "gravity_offset": 0.05})
+    assert named_first(cv, by_rollouts, stable, 0.5) == ["wind", "gravity_offset"]
 
 
 def test_confirmation_needs_the_heldout_gain_and_better_training_rollouts():
