@@ -13,6 +13,8 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
 
 from physics_helpers import sheet, uv_sphere  # noqa: E402
 
+from gg_core.diagnosis.confirm import Trial  # noqa: E402
+from gg_core.diagnosis.folds import Fold  # noqa: E402
 from gg_core.geometry.meshio import write_obj, write_ply  # noqa: E402
 from gg_core.physics.cloth import Cloth  # noqa: E402
 from gg_core.physics.forces import make_terms  # noqa: E402
@@ -78,3 +80,9 @@ def write_blender_layout_capture(root: Path) -> Path:
     truth.update(BLENDER_TRUTH, garment={"pinned_vertices": np.flatnonzero(pinned).tolist()})
     (root / "truth.json").write_text(json.dumps(truth))
     return root
+
+
+def fold(held: str, ref: tuple[float, float], **trials: tuple[float, float]) -> Fold:
+    """A fold judged against (held-out, training) rollout errors `ref`, with trials name=(held-out, training)."""
+    return Fold(["a", "b"], [held], Trial([], ref[0], 1.0, ref[1]),
+                {n: Trial([n], h, 1.0, t) for n, (h, t) in trials.items()})

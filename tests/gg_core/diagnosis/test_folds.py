@@ -3,14 +3,9 @@ from __future__ import annotations
 
 import pytest
 
-from gg_core.diagnosis.confirm import Trial
-from gg_core.diagnosis.folds import CrossValidation, Fold, extra_splits, finalists
+from diagnosis_helpers import fold
 
-
-def _fold(held: str, ref: tuple[float, float], **trials: tuple[float, float]) -> Fold:
-    """A fold judged against (held-out, training) rollout errors `ref`, with trials name=(held-out, training)."""
-    return Fold(["a", "b"], [held], Trial([], ref[0], 1.0, ref[1]),
-                {n: Trial([n], h, 1.0, t) for n, (h, t) in trials.items()})
+from gg_core.diagnosis.folds import CrossValidation, extra_splits, finalists
 
 
 def test_each_training_sequence_is_held_out_once_and_fitted_on_all_others():
@@ -19,56 +14,56 @@ def test_each_training_sequence_is_held_out_once_and_fitted_on_all_others():
 
 
 def test_finalists_gained_enough_on_heldout_or_training_rollouts_largest_first():
-    fold = _fold("arm", (0.010, 0.010), air=(0.0095, 0.0065), wind=(0.0085, 0.0099), tilt=(0.0097, 0.0095),
-                 drag=(0.0080, 0.0080))
+    arm = fold("arm", (0.010, 0.010), air=(0.0095, 0.0065), wind=(0.0085, 0.0099), tilt=(0.0097, 0.0095),
+               drag=(0.0080, 0.0080))
     # air: 5 % held-out but 35 % training; wind 15 % held-out; tilt 5 % / 5 %: not worth more folds
-    assert finalists(fold, 0.10, 3) == ["air", "drag", "wind"]
-    assert finalists(fold, 0.10, 1) == ["air"]
-    assert finalists(fold, 0.10, 0) == []
+    assert finalists(arm, 0.10, 3) == ["air", "drag", "wind"]
+    assert finalists(arm, 0.10, 1) == ["air"]
+    assert finalists(arm, 0.10, 0) == []
 
 
 def test_confirmation_is_on_the_mean_heldout_gain_with_most_folds_improving():
     # our simulator's hidden air damping: the arm swing barely shows it, the walk and the twist do
-    cv = CrossValidation([_fold("arm", (0.010, 0.010), air=(0.0102, 0.0065), wind=(0.0085, 0.0099)),
-                          _fold("walk", (0.010, 0.010), air=(0.0060, 0.0090), wind=(0.0110, 0.0090)),
-                          _fold("twist", (0.010, 0.010), air=(0.0070, 0.0080), wind=(0.0090, 0.0095))])
+    cv = CrossValidation([fold("arm", (0.010, 0.010), air=(0.0102, 0.0065), wind=(0.0085, 0.0099)),
+                          fold("walk", (0.010, 0.010), air=(0.0060, 0.0090), wind=(0.0110, 0.0090)),
+                          fold("twist", (0.010, 0.010), air=(0.0070, 0.0080), wind=(0.0090, 0.0095))])
     assert cv.mean_gains("air") == pytest.approx((0.68 / 3, 0.65 / 3))
     assert cv.confirmed("air", 0.10, 0.25)
     assert cv.confirmed("air", 0.10, 0.25)           # the arm swing alone does not show it: most folds do
     assert not cv.confirmed("wind", 0.10, 0.25)       # mean 5 % held-out, and worse without the walk
     assert not cv.confirmed("air", 0.30, 0.25)
     assert not cv.confirmed("air", 0.10, 3.0)         # 2.5 mm on average: under a 3 mm floor
-    lucky = CrossValidation([_fold("arm", (0.010, 0.010), x=(0.005, 0.009)),
-                             _fold("walk", (0.010, 0.010), x=(0.006, 0.011))])   # training worse without the walk
+    lucky = CrossValidation([fold("arm", (0.010, 0.010), x=(0.005, 0.009)),
+                             fold("walk", (0.010, 0.010), x=(0.006, 0.011))])   # training worse without the walk
     assert not lucky.confirmed("x", 0.10, 0.25)
-    one_fold = CrossValidation([_fold("arm", (0.010, 0.010), x=(0.0103, 0.009)),   # mean 14 %, from one fold
-                                _fold("walk", (0.010, 0.010), x=(0.0050, 0.009)),
-                                _fold("twist", (0.010, 0.010), x=(0.0104, 0.009))])
+    one_fold = CrossValidation([fold("arm", (0.010, 0.010), x=(0.0103, 0.009)),   # mean 14 %, from one fold
+                                fold("walk", (0.010, 0.010), x=(0.0050, 0.009)),
+                                fold("twist", (0.010, 0.010), x=(0.0104, 0.009))])
     assert one_fold.mean_gains("x")[0] > 0.1 and not one_fold.confirmed("x", 0.10, 0.25)
     # Blender's capture with nothing hidden (seed 1): mass damping +9.5 / -19 / +7 % held out
-    none = CrossValidation([_fold("arm", (0.010, 0.010), x=(0.00905, 0.0086)),
-                            _fold("walk", (0.010, 0.010), x=(0.0119, 0.0083)),
-                            _fold("twist", (0.010, 0.010), x=(0.0093, 0.0097))])
+    none = CrossValidation([fold("arm", (0.010, 0.010), x=(0.00905, 0.0086)),
+                            fold("walk", (0.010, 0.010), x=(0.0119, 0.0083)),
+                            fold("twist", (0.010, 0.010), x=(0.0093, 0.0097))])
     assert not none.confirmed("x", 0.10, 0.25)
 
 
 def test_a_candidate_missing_from_a_fold_is_not_confirmed_and_one_fold_is_the_given_split():
-    cv = CrossValidation([_fold("arm", (0.010, 0.010), air=(0.0080, 0.0080), tilt=(0.0070, 0.0090)),
-                          _fold("walk", (0.010, 0.010), air=(0.0080, 0.0080))])
+    cv = CrossValidation([fold("arm", (0.010, 0.010), air=(0.0080, 0.0080), tilt=(0.0070, 0.0090)),
+                          fold("walk", (0.010, 0.010), air=(0.0080, 0.0080))])
     assert cv.confirmed("air", 0.10, 0.25) and not cv.complete("tilt") and not cv.confirmed("tilt", 0.10, 0.25)
-    alone = CrossValidation([_fold("arm", (0.010, 0.012), a=(0.0085, 0.011), b=(0.0095, 0.011),
-                                   c=(0.0080, 0.0125))])
+    alone = CrossValidation([fold("arm", (0.010, 0.012), a=(0.0085, 0.011), b=(0.0095, 0.011),
+                                  c=(0.0080, 0.0125))])
     assert [n for n in "abc" if alone.confirmed(n, 0.10, 0.5)] == ["a"]   # b: 5 % held-out; c: training worse
 
 
 def test_confirmed_candidates_are_ranked_by_the_smaller_of_their_mean_gains():
     # Blender's hidden wind (seed 2): the tilt rolls the training sequences out better, wind the held-out one more
-    cv = CrossValidation([_fold("arm", (0.01059, 0.01139), wind=(0.00874, 0.00977), tilt=(0.00943, 0.00917))])
+    cv = CrossValidation([fold("arm", (0.01059, 0.01139), wind=(0.00874, 0.00977), tilt=(0.00943, 0.00917))])
     assert cv.ranked(["tilt", "wind"]) == ["wind", "tilt"]
     # our simulator's hidden air damping: wind gains more held-out (-16 %) but barely helps training (-3 %)
-    cv = CrossValidation([_fold("arm", (0.00369, 0.00635), wind=(0.00310, 0.00616), air=(0.00321, 0.00432))])
+    cv = CrossValidation([fold("arm", (0.00369, 0.00635), wind=(0.00310, 0.00616), air=(0.00321, 0.00432))])
     assert cv.ranked(["wind", "air"]) == ["air", "wind"]
-    tie = CrossValidation([_fold("arm", (0.004, 0.005), a=(0.0030, 0.004), b=(0.0020, 0.004))])
+    tie = CrossValidation([fold("arm", (0.004, 0.005), a=(0.0030, 0.004), b=(0.0020, 0.004))])
     assert tie.ranked(["a", "b"]) == ["b", "a"]        # equal smaller gain: the held-out gain decides
     summary = tie.to_json()
     assert summary["candidates"]["b"]["folds"] == 1 and summary["folds"][0]["heldout"] == ["arm"]
@@ -78,9 +73,9 @@ def test_confirmed_candidates_are_ranked_by_the_smaller_of_their_mean_gains():
 def test_the_residual_breaks_a_tie_the_folds_do_not_separate():
     # Blender's hidden wind (seed 2), per fold (held-out, training): the tilt comes first on the mean gains but
     # is better in 2 of 3 folds only; the forward selection chose wind
-    cv = CrossValidation([_fold("arm", (0.01059, 0.0114), wind=(0.00875, 0.00978), tilt=(0.00943, 0.00918)),
-                          _fold("walk", (0.01304, 0.0120), wind=(0.01334, 0.01037), tilt=(0.01219, 0.0096)),
-                          _fold("twist", (0.01079, 0.0110), wind=(0.00777, 0.01041), tilt=(0.00806, 0.01040))])
+    cv = CrossValidation([fold("arm", (0.01059, 0.0114), wind=(0.00875, 0.00978), tilt=(0.00943, 0.00918)),
+                          fold("walk", (0.01304, 0.0120), wind=(0.01334, 0.01037), tilt=(0.01219, 0.0096)),
+                          fold("twist", (0.01079, 0.0110), wind=(0.00777, 0.01041), tilt=(0.00806, 0.01040))])
     by_rollouts = cv.ranked(["wind", "tilt"])
     assert by_rollouts == ["tilt", "wind"]
     assert not cv.separated("tilt", "wind") and not cv.separated("wind", "tilt")
@@ -89,16 +84,16 @@ def test_the_residual_breaks_a_tie_the_folds_do_not_separate():
     assert cv.residual_tie_break(by_rollouts, ["drag", "x"]) == ["tilt", "wind"]          # chose neither
     assert cv.residual_tie_break([], ["wind"]) == []
     # separated in every fold: the rollouts keep their first even against the residual's choice
-    clear = CrossValidation([_fold(h, (0.010, 0.010), air=(0.006, 0.006), wind=(0.008, 0.009))
+    clear = CrossValidation([fold(h, (0.010, 0.010), air=(0.006, 0.006), wind=(0.008, 0.009))
                              for h in ("arm", "walk", "twist")])
     assert clear.separated("air", "wind")
     assert clear.residual_tie_break(["air", "wind"], ["wind", "air"]) == ["air", "wind"]
 
 
 def test_refit_ranges_span_the_folds_refits_per_component_without_the_material():
-    folds = [_fold(held, (0.01, 0.01), wind=(0.008, 0.008)) for held in ("arm", "walk", "twist")]
-    for fold, alpha, push in zip(folds, (7.9, 12.7, 12.0), ((1.0, 0.0, 2.0), (3.0, 0.5, 1.0), (2.0, 0.2, 0.5))):
-        fold.trials["wind"].values = {"material.density": 0.2, "mass_damping.alpha": alpha, "wind.pressure": push}
+    folds = [fold(held, (0.01, 0.01), wind=(0.008, 0.008)) for held in ("arm", "walk", "twist")]
+    for one, alpha, push in zip(folds, (7.9, 12.7, 12.0), ((1.0, 0.0, 2.0), (3.0, 0.5, 1.0), (2.0, 0.2, 0.5))):
+        one.trials["wind"].values = {"material.density": 0.2, "mass_damping.alpha": alpha, "wind.pressure": push}
     ranges = CrossValidation(folds).refit_ranges("wind")
     assert ranges == {"mass_damping.alpha": [7.9, 12.7], "wind.pressure": [[1.0, 0.0, 0.5], [3.0, 0.5, 2.0]]}
     folds[1].trials["wind"].values = {"anisotropic_stretch.k_weft": 3e4}     # its warp was not refitted there

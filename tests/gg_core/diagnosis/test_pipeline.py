@@ -6,10 +6,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from diagnosis_helpers import fold
+
 from gg_core.diagnosis import pipeline
 from gg_core.diagnosis.confirm import Trial
+from gg_core.diagnosis.folds import CrossValidation
 from gg_core.diagnosis.library import BY_NAME, CANDIDATES, MOVING_AIR
-from gg_core.diagnosis.folds import CrossValidation, Fold
 from gg_core.diagnosis.pipeline import (confirmed, implausible, judge_reference, named_first, propose, selected,
                                        usable_candidates)
 from gg_core.diagnosis.selection import Selection
@@ -37,13 +39,11 @@ def test_candidates_are_tried_only_when_selected_often_enough():
 def test_only_a_candidate_the_selection_chose_can_break_the_folds_tie():
     # our simulator's hidden tilt at 1.5 mm noise (session 28), per fold (held-out, training) rollout errors: the
     # tilt leads the rollouts but loses the walk-less fold, so the folds do not separate it from wind
-    folds = [Fold(["a", "b"], [held], Trial([], ref[0], 1.0, ref[1]),
-                  {n: Trial([n], h, 1.0, t) for n, (h, t) in trials.items()})
-             for held, ref, trials in [
-                 ("arm", (0.01204, 0.01422), {"wind": (0.00813, 0.00991), "gravity_offset": (0.0052, 0.00732)}),
-                 ("walk", (0.01401, 0.01188), {"wind": (0.01255, 0.00806), "gravity_offset": (0.01393, 0.01099)}),
-                 ("twist", (0.01216, 0.01258), {"wind": (0.00818, 0.0092), "gravity_offset": (0.00604, 0.0072)})]]
-    cv = CrossValidation(folds)
+    cv = CrossValidation([fold("arm", (0.01204, 0.01422), wind=(0.00813, 0.00991), gravity_offset=(0.0052, 0.00732)),
+                          fold("walk", (0.01401, 0.01188), wind=(0.01255, 0.00806),
+                               gravity_offset=(0.01393, 0.01099)),
+                          fold("twist", (0.01216, 0.01258), wind=(0.00818, 0.0092),
+                               gravity_offset=(0.00604, 0.0072))])
     by_rollouts = cv.ranked(["wind", "gravity_offset"])
     assert by_rollouts == ["gravity_offset", "wind"]
     explained = {"wind": 0.074, "gravity_offset": 0.071}
