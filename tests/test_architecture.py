@@ -25,7 +25,8 @@ def _sources(*folders: str) -> list[Path]:
 
 
 def _runtime_imports(path: Path) -> list[tuple[int, str, int]]:
-    """(line, module, relative level) of every import outside `if TYPE_CHECKING:` blocks (those never run)."""
+    """(line, module, relative level) of every import outside `if TYPE_CHECKING:` blocks (those never run); a
+    `from M import a, b` gives M.a and M.b, since a and b may be modules themselves (`from .. import stages`)."""
     found: list[tuple[int, str, int]] = []
 
     def visit(node: ast.AST) -> None:
@@ -37,7 +38,8 @@ def _runtime_imports(path: Path) -> list[tuple[int, str, int]]:
             if isinstance(child, ast.Import):
                 found.extend((child.lineno, a.name, 0) for a in child.names)
             elif isinstance(child, ast.ImportFrom):
-                found.append((child.lineno, child.module or "", child.level))
+                base = f"{child.module}." if child.module else ""
+                found.extend((child.lineno, base + a.name, child.level) for a in child.names)
             visit(child)
 
     visit(ast.parse(path.read_text(), str(path)))
@@ -57,8 +59,8 @@ def _gg_core_layer(path: Path, module: str, level: int) -> str | None:
     if level - 1 > len(package):
         return None
     base = package[:len(package) - (level - 1)]
-    target = [*base, *(module.split(".") if module else [])]
-    return target[0] if target else None
+    target = [*base, *module.split(".")]
+    return target[0]
 
 
 @pytest.mark.parametrize("folder", ["blender_addon", "operators"])
@@ -91,6 +93,7 @@ def test_layer_resolution_of_relative_imports() -> None:
     path = ROOT / "gg_core" / "diagnosis" / "pipeline.py"
     assert _gg_core_layer(path, "stages.diagnose", 2) == "stages"
     assert _gg_core_layer(path, "residuals", 1) == "diagnosis"
+    assert _gg_core_layer(path, "stages", 2) == "stages"                    # from .. import stages
     assert _gg_core_layer(path, "gg_core.cli", 0) == "cli"
     assert _gg_core_layer(path, "numpy", 0) is None
 
