@@ -34,7 +34,6 @@ import json
 import math
 import sys
 from collections.abc import Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -52,6 +51,7 @@ EFFECTS = ("none", "wind", "air_drag", "friction", "shrink", "stiff_patch", "gra
 STRENGTH = {"wind": {"strength": (0.0, 1000.0)}, "air_drag": {"air_damping": (1.0, 10.0)},
             "friction": {"friction": (5.0, 60.0)}, "shrink": {"factor": (0.0, 0.15)},
             "stiff_patch": {"factor": (1.0, 30.0)}, "gravity": {"scale": (1.0, 1.25), "tilt_deg": (0.0, 12.0)}}
+CLOTH_STEPS = 5     # Blender's cloth steps per frame in the captures (its default Quality Steps)
 # the library candidate that models each class (the "true effect" simulator)
 CLASS_CANDIDATE = {"wind": "wind", "linear_damping": "mass_damping", "friction": "body_friction",
                    "rest_length": "rest_length_region", "region_stiffness": "region_stiffness",
@@ -77,23 +77,29 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rest-given", action="store_true",
                         help="give each diagnosis the garment's unloaded template as its rest mesh (gg diagnose "
                              "--rest-mesh), as a user with the sewing pattern could; default: the first frame")
+    parser.add_argument("--cloth-steps", type=int, default=CLOTH_STEPS,
+                        help="Blender's cloth steps per frame (Quality Steps) of the captures; the step change is "
+                             "measured against twice as many. Captures at other than the default are cached under "
+                             "names ending in _q<steps>")
     parser.add_argument("--fit-horizon", type=int, default=3,
                         help="frames each fitted observed state is predicted ahead (gg diagnose --fit-horizon)")
 
 
-def preset(frames: int, vertices: int):
+def preset(frames: int, vertices: int, cloth_steps: int = CLOTH_STEPS):
     from ..synth.presets import Preset
 
     return Preset("bench_diagnose", camera_rows=((4, 8.0),), height=64, n_sequences=3, n_frames=frames,
-                  settle_frames=14, garment_vertices=vertices, samples=1, denoise=False, cloth_quality=5,
+                  settle_frames=14, garment_vertices=vertices, samples=1, denoise=False, cloth_quality=cloth_steps,
                   collision_quality=2, self_collision=False, motions=("walk", "torso_twist", "arm_swing"))
 
 
 def case_name(args: argparse.Namespace, effect: str, strength: float, seed: int) -> str:
     """The cached capture of one benchmark case; the effects' reference capture is ("none", 0). Captures of our
-    simulator (--truth-simulator ours) are named with an `ours_` prefix."""
+    simulator (--truth-simulator ours) are named with an `ours_` prefix, those at other than Blender's default
+    steps per frame with a `_q<steps>` suffix."""
     prefix = "ours_" if args.truth_simulator == "ours" else ""
-    return f"{prefix}{args.garment}_{effect}_s{strength:g}_seed{seed}"
+    suffix = "" if args.cloth_steps == CLOTH_STEPS else f"_q{args.cloth_steps}"
+    return f"{prefix}{args.garment}_{effect}_s{strength:g}_seed{seed}{suffix}"
 
 
 def capture_of(args: argparse.Namespace, name: str, seed: int, effect: str = "none", params: Sequence[str] = (),
@@ -113,10 +119,10 @@ def capture_of(args: argparse.Namespace, name: str, seed: int, effect: str = "no
         resimulate(reference, capture, effect, list(params), hand_mask,
                    substeps=2 * DiagnoseRequest.substeps * quality_factor)
     elif not (capture / "truth.json").is_file():
-        base = preset(args.frames, args.vertices)
-        generate(SynthRequest(preset=replace(base, cloth_quality=base.cloth_quality * quality_factor), out=capture,
-                              seed=seed, garment=args.garment, effect=effect, effect_params=list(params),
-                              render=False, progress="none"))
+        steps = args.cloth_steps * quality_factor
+        generate(SynthRequest(preset=preset(args.frames, args.vertices, steps), out=capture, seed=seed,
+                              garment=args.garment, effect=effect, effect_params=list(params), render=False,
+                              progress="none"))
     return capture
 
 

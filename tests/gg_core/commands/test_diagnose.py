@@ -16,9 +16,9 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
 from diagnosis_helpers import write_blender_layout_capture, write_sim_capture  # noqa: E402
 
 from gg_core.cli import main  # noqa: E402
-from gg_core.commands.bench_diagnose import (capture_of, case_name, confusion, effect_params,  # noqa: E402
-                                             parameter_error, parameter_errors, region_overlap, summarize,
-                                             true_model_l2, truth_parameters)
+from gg_core.commands.bench_diagnose import (CLOTH_STEPS, capture_of, case_name, confusion,  # noqa: E402
+                                             effect_params, parameter_error, parameter_errors, region_overlap,
+                                             summarize, true_model_l2, truth_parameters)
 from gg_core.diagnosis.blender_units import WIND_COEF  # noqa: E402
 from gg_core.physics.forces import TERMS  # noqa: E402
 from gg_core.stages.diagnose import DiagnoseRequest  # noqa: E402
@@ -147,12 +147,14 @@ def test_bench_scoring():
 
 
 def test_bench_captures_of_our_simulator_resimulate_the_blender_reference_of_their_seed(tmp_path):
-    args = argparse.Namespace(cache=tmp_path, garment="sheet", truth_simulator="blender")
+    args = argparse.Namespace(cache=tmp_path, garment="sheet", truth_simulator="blender", cloth_steps=CLOTH_STEPS)
     reference = write_blender_layout_capture(tmp_path / case_name(args, "none", 0.0, 3))   # stands in for Blender's
     args.truth_simulator = "ours"
     name = case_name(args, "air_drag", 1.0, 3)
     capture = capture_of(args, name, 3, "air_drag", effect_params("air_drag", 1.0))
     assert name == "ours_sheet_air_drag_s1_seed3" and capture == tmp_path / name
+    finer = argparse.Namespace(**{**vars(args), "cloth_steps": 4 * CLOTH_STEPS})
+    assert case_name(finer, "none", 0.0, 3) == f"ours_sheet_none_s0_seed3_q{4 * CLOTH_STEPS}"   # cached apart
     truth = json.loads((capture / "truth.json").read_text())
     assert truth["true_parameters"] == {"mass_damping.alpha": pytest.approx(10.0)}
     assert truth["material"]["ours"]["substeps"] == 4 and reference.name in truth["generator"]
