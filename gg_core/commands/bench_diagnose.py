@@ -19,7 +19,9 @@ Blender's own motion moves 6.8-11.2 mm RMS per sequence between 5 and 10 steps p
 chaotically on any perturbation. Hidden friction changes the motion by 6 mm, and by 7 mm more between 5 and 10
 steps (cosine 0.14-0.70 between the two changes); hidden air damping by 17 mm, and 8-12 mm between the steps
 (cosine 0.78-0.88). An effect whose step change is as large as its signal is as much the reference's numerics
-as physics.
+as physics. More steps help some effects (`--cloth-steps`; session 29, seeds 1-2): the stiff patch's step change
+is 0.86-0.99 of its signal at 5 steps and 0.57-0.58 at 20 (against 40), hidden friction's 1.17 / 1.12 / 0.96 at
+5 / 10 / 20 (seed 1): friction stays the reference's numerics.
 
 With `--truth-simulator ours` the captures' garments are moved by our own simulator instead (the same garment,
 bodies and pins as the seed's Blender capture with nothing hidden; gg_core/diagnosis/resimulated.py): the
