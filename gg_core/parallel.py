@@ -15,7 +15,7 @@ import multiprocessing
 import os
 import queue
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Callable, Sequence, TypeVar
 
 from .errors import InputError
@@ -51,7 +51,8 @@ def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progre
     """[fn(job, step) for job in jobs], in `workers` processes (in this process, one after another, for one
     worker or one job). `then(job, result)` may name a follow-up job, which `fn` runs as soon as a worker is
     free; the job's result is then its follow-up's (stage 2: a sequence's fits, then its stereo step, so that a
-    worker done fitting refines a finished sequence instead of idling). `fn` and the jobs must pickle. A failing
+    worker done fitting refines a finished sequence instead of idling). A follow-up starts once its job's progress
+    has reached `progress` (its end marker drained), so a job's messages precede its follow-up's. `fn` and the jobs must pickle. A failing
     job's exception is raised here once the other jobs have finished, so what they write is kept (the stages
     resume from it)."""
     if workers <= 1 or len(jobs) <= 1:
@@ -60,13 +61,28 @@ def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progre
     messages = ctx.Queue()
     results: list = [None] * len(jobs)
     errors: list[BaseException] = []
+    ended: set[int] = set()                 # runs whose end marker was drained: all their steps were before it
+    waiting: dict[Future, float] = {}       # done runs whose end marker is still on its way: since when
     with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=ctx, initializer=_init_worker,
                              initargs=(messages,)) as pool:
-        pending = {pool.submit(_run, fn, job): (i, job) for i, job in enumerate(jobs)}
-        started, ended, quiet_since = len(jobs), 0, None
-        while pending or ended < started:
+        pending: dict[Future, tuple[int, J, int]] = {}
+        started: list[int] = []             # run keys, in submission order
+
+        def submit(i: int, job: J) -> None:
+            started.append(len(started))
+            pending[pool.submit(_run, fn, job, started[-1])] = (i, job, started[-1])
+
+        for i, job in enumerate(jobs):
+            submit(i, job)
+        quiet_since = None
+        while pending or len(ended) < len(started):
             for future in [f for f in pending if f.done()]:
-                i, job = pending.pop(future)
+                i, job, key = pending[future]
+                # a follow-up waits for its job's progress (workers' queues are not ordered across processes)
+                if (future.exception() is None and key not in ended
+                        and time.monotonic() - waiting.setdefault(future, time.monotonic()) < _GRACE_S):
+                    continue
+                del pending[future]
                 if future.exception() is not None:
                     errors.append(future.exception())
                     continue
@@ -74,8 +90,7 @@ def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progre
                 if follow is None:
                     results[i] = future.result()
                 else:
-                    pending[pool.submit(_run, fn, follow)] = (i, follow)
-                    started += 1
+                    submit(i, follow)
             try:
                 item = messages.get(timeout=_POLL_S)
             except queue.Empty:
@@ -86,8 +101,8 @@ def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progre
                 if time.monotonic() - quiet_since > _GRACE_S:
                     break
                 continue
-            if item is None:
-                ended += 1
+            if item[0] is None:
+                ended.add(item[1])
             else:
                 progress.step(*item)
     if errors:
@@ -108,7 +123,7 @@ def _init_worker(messages) -> None:
         os.environ[name] = "1"
 
 
-def _run(fn: Callable[[J, Step], R], job: J) -> R:
+def _run(fn: Callable[[J, Step], R], job: J, key: int) -> R:
     import numba  # noqa: PLC0415 - after _init_worker limited the threads
     import torch  # noqa: PLC0415
 
@@ -121,4 +136,4 @@ def _run(fn: Callable[[J, Step], R], job: J) -> R:
     try:
         return fn(job, step)
     finally:
-        _queue.put(None)          # this job ended: all its steps are on the queue before this
+        _queue.put((None, key))   # this run ended: all its steps are on the queue before this
