@@ -52,9 +52,9 @@ def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progre
     worker or one job). `then(job, result)` may name a follow-up job, which `fn` runs as soon as a worker is
     free; the job's result is then its follow-up's (stage 2: a sequence's fits, then its stereo step, so that a
     worker done fitting refines a finished sequence instead of idling). A follow-up starts once its job's progress
-    has reached `progress` (its end marker drained), so a job's messages precede its follow-up's. `fn` and the jobs must pickle. A failing
-    job's exception is raised here once the other jobs have finished, so what they write is kept (the stages
-    resume from it)."""
+    has reached `progress` (its end marker drained), so a job's messages precede its follow-up's. `fn` and the
+    jobs must pickle. A failing job's exception is raised here once the other jobs have finished, so what they
+    write is kept (the stages resume from it)."""
     if workers <= 1 or len(jobs) <= 1:
         return [_chain(fn, job, progress.step, then) for job in jobs]
     ctx = multiprocessing.get_context("spawn")
