@@ -66,16 +66,17 @@ def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progre
     with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=ctx, initializer=_init_worker,
                              initargs=(messages,)) as pool:
         pending: dict[Future, tuple[int, J, int]] = {}
-        started: list[int] = []             # run keys, in submission order
+        started = 0                         # runs submitted, follow-ups included; a run's key is its number
 
         def submit(i: int, job: J) -> None:
-            started.append(len(started))
-            pending[pool.submit(_run, fn, job, started[-1])] = (i, job, started[-1])
+            nonlocal started
+            pending[pool.submit(_run, fn, job, started)] = (i, job, started)
+            started += 1
 
         for i, job in enumerate(jobs):
             submit(i, job)
         quiet_since = None
-        while pending or len(ended) < len(started):
+        while pending or len(ended) < started:
             for future in [f for f in pending if f.done()]:
                 i, job, key = pending[future]
                 # a follow-up waits for its job's progress (workers' queues are not ordered across processes)
