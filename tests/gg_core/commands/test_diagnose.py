@@ -16,9 +16,10 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
 from diagnosis_helpers import write_blender_layout_capture, write_sim_capture  # noqa: E402
 
 from gg_core.cli import main  # noqa: E402
-from gg_core.commands.bench_diagnose import (CLOTH_STEPS, capture_of, case_name, confusion,  # noqa: E402
-                                             effect_params, parameter_error, parameter_errors, region_overlap,
-                                             summarize, true_model_l2, truth_parameters)
+from gg_core.commands.bench_diagnose import (BLENDER_DEFAULT_STEPS, CLOTH_STEPS, capture_of,  # noqa: E402
+                                             case_name, confusion, effect_params, parameter_error,
+                                             parameter_errors, region_overlap, summarize, true_model_l2,
+                                             truth_parameters)
 from gg_core.diagnosis.blender_units import WIND_COEF  # noqa: E402
 from gg_core.physics.forces import TERMS  # noqa: E402
 from gg_core.stages.diagnose import DiagnoseRequest  # noqa: E402
@@ -152,9 +153,12 @@ def test_bench_captures_of_our_simulator_resimulate_the_blender_reference_of_the
     args.truth_simulator = "ours"
     name = case_name(args, "air_drag", 1.0, 3)
     capture = capture_of(args, name, 3, "air_drag", effect_params("air_drag", 1.0))
-    assert name == "ours_sheet_air_drag_s1_seed3" and capture == tmp_path / name
+    assert name == f"ours_sheet_air_drag_s1_seed3_q{CLOTH_STEPS}" and capture == tmp_path / name
+    # captures at Blender's own default steps keep the unsuffixed names of the older caches; others are cached apart
+    blender_default = argparse.Namespace(**{**vars(args), "cloth_steps": BLENDER_DEFAULT_STEPS})
+    assert case_name(blender_default, "none", 0.0, 3) == "ours_sheet_none_s0_seed3"
     finer = argparse.Namespace(**{**vars(args), "cloth_steps": 4 * CLOTH_STEPS})
-    assert case_name(finer, "none", 0.0, 3) == f"ours_sheet_none_s0_seed3_q{4 * CLOTH_STEPS}"   # cached apart
+    assert case_name(finer, "none", 0.0, 3) == f"ours_sheet_none_s0_seed3_q{4 * CLOTH_STEPS}"
     truth = json.loads((capture / "truth.json").read_text())
     assert truth["true_parameters"] == {"mass_damping.alpha": pytest.approx(10.0)}
     assert truth["material"]["ours"]["substeps"] == 4 and reference.name in truth["generator"]
