@@ -7,9 +7,11 @@ noise), and the answer is scored against truth.json, which the diagnosis never r
 same thing, and held-out gains. The baseline every gain is measured against is the global-parameter simulator of
 the same run; "true effect" is the same simulator given the true effect's term (on the true region for region
 effects), refitted the same way, which gives the share of the reachable gain the diagnosis closed (all of it, by
-construction, where the diagnosis named that term). On captures of our own simulator the "true model" is also
-rolled out: the capture's own material, terms and hidden effect, from the diagnosis's rest state at its substeps,
-which nothing fitted: the gain a diagnosis knowing the physics could reach from that rest state.
+construction, where the diagnosis named that term), in every fold of the cross-validation as well: a recording
+that barely shows the effect even to the true term caps the mean gain over the folds whatever the diagnosis
+names (session 30). On captures of our own simulator the "true model" is also rolled out: the capture's own
+material, terms and hidden effect, from the diagnosis's rest state at its substeps, which nothing fitted: the gain
+a diagnosis knowing the physics could reach from that rest state.
 
 Two sizes need no simulator of ours (gg_core/metrics/motion.py): the effect's `signal` (how differently its
 capture moves from the same seed's capture with nothing hidden) and its `step change` (how much that difference
@@ -254,6 +256,11 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     true_params = truth_parameters(truth)
     gap = None if ref is None else before - ref["heldout_l2"]
     named_refit = accepted["refit"] if accepted and predicted == true_class else None
+    folds = fold_gains(report, accepted["name"] if accepted else None, reference[0] if reference else None)
+    cv_gain = None if accepted is None or not accepted.get("cross_validated") \
+        else accepted["cross_validated"]["heldout_gain"]
+    cv_true = report.get("cross_validation", {}).get("given_truth", {}).get(reference[0], {}).get("heldout_gain") \
+        if reference else None
     return {
         "capture": name, "effect": effect, "strength": strength, "seed": seed, "noise_mm": noise,
         "truth_simulator": args.truth_simulator, "rest_given": args.rest_given,
@@ -263,10 +270,13 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         "rollouts_first": report.get("cross_validation", {}).get("rollouts_first"),   # where the residual overruled
         "implausible": [e["name"] for e in report["effects"] if e.get("implausible")],
         "heldout_l2_before": before, "heldout_l2_after": after, "heldout_gain": 1.0 - after / before,
-        "cross_validated_gain": None if accepted is None or not accepted.get("cross_validated")
-        else accepted["cross_validated"]["heldout_gain"],
+        "cross_validated_gain": cv_gain,
         "true_effect_l2": None if ref is None else ref["heldout_l2"],
         "gap_closed": None if gap is None or gap <= 0 else (before - after) / gap,
+        "cross_validated_true_effect_gain": cv_true,
+        "cross_validated_gap_closed": None if cv_gain is None or cv_true is None or cv_true <= 0
+        else cv_gain / cv_true,
+        "folds": folds,
         "true_model_l2": true_model,
         "true_model_gap_closed": None if true_model is None or before <= true_model
         else (before - after) / (before - true_model),
@@ -282,6 +292,19 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     }
 
 
+def fold_gains(report: dict, named: str | None, true: str | None) -> list[dict]:
+    """Per fold of the diagnosis's cross-validation: the held-out sequences, the held-out gain of the named
+    candidate and of the simulator given the true effect (None where that fold did not try it). The second says
+    how much a recording can show of the effect at all: a fold whose true effect gains little caps the mean."""
+    out = []
+    for fold in report.get("cross_validation", {}).get("folds", []):
+        named_trial, true_trial = fold["trials"].get(named or ""), fold.get("given_truth", {}).get(true or "")
+        out.append({"heldout": fold["heldout"],
+                    "named_gain": None if named_trial is None else named_trial["heldout_gain"],
+                    "true_effect_gain": None if true_trial is None else true_trial["heldout_gain"]})
+    return out
+
+
 def summarize(cases: list[dict], min_gain: float) -> dict:
     present = [c for c in cases if c["true_class"] != "none"]
     none = [c for c in cases if c["true_class"] == "none"]
@@ -289,6 +312,10 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
     gains = [c["heldout_gain"] for c in present if c["correct"]]
     cv_gains = [c["cross_validated_gain"] for c in present if c["correct"] and c["cross_validated_gain"] is not None]
     closed = [c["gap_closed"] for c in present if c["gap_closed"] is not None]
+    cv_closed = [c["cross_validated_gap_closed"] for c in present
+                 if c["correct"] and c.get("cross_validated_gap_closed") is not None]
+    cv_true = [c["cross_validated_true_effect_gain"] for c in present
+               if c.get("cross_validated_true_effect_gain") is not None]
     closed_to_truth = [c["true_model_gap_closed"] for c in present if c.get("true_model_gap_closed") is not None]
     overruled = [c for c in cases if c["rollouts_first"]]
 
@@ -314,6 +341,8 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
             "mean_heldout_gain_when_named": mean(gains),
             "mean_cross_validated_gain_when_named": mean(cv_gains),
             "median_gap_closed": float(np.median(closed)) if closed else None,
+            "median_cross_validated_gap_closed": float(np.median(cv_closed)) if cv_closed else None,
+            "mean_cross_validated_true_effect_gain": mean(cv_true),
             "median_true_model_gap_closed": float(np.median(closed_to_truth)) if closed_to_truth else None,
             "residual_tie_breaks": len(overruled),
             "residual_tie_breaks_right": sum(c["correct"] for c in overruled)}
@@ -346,6 +375,8 @@ def run(args: argparse.Namespace) -> int:
                              f" (the rollouts led with {case['rollouts_first']}, the residual chose)")
                           + ("" if case["true_effect_l2"] is None else
                              f", true effect {case['true_effect_l2'] * 1e3:.1f} mm")
+                          + ("" if case["cross_validated_true_effect_gain"] is None else
+                             f" ({-case['cross_validated_true_effect_gain']:+.0%} over the folds)")
                           + ("" if case["true_model_l2"] is None else
                              f", true model {case['true_model_l2'] * 1e3:.1f} mm")
                           + f"; motion change {case['signal_mm']:.1f} mm, {case['step_change_mm']:.1f} mm "

@@ -17,7 +17,7 @@ quirks gains nothing there, because the fold's refit no longer sees it), the res
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,27 +26,38 @@ from .confirm import Trial
 
 @dataclass
 class Fold:
-    """One split: the sequences fitted on and held out, what trials are judged against (pipeline.judge_reference)
-    and the candidates' trials."""
+    """One split: the sequences fitted on and held out, what trials are judged against (pipeline.judge_reference),
+    the candidates' trials and, for benchmarks, the trials of the candidates given the truth (`given`: the true
+    effect, on its true region), which are never named."""
 
     train: list[str]
     heldout: list[str]
     reference: Trial
     trials: dict[str, Trial]
+    given: dict[str, Trial] = field(default_factory=dict)
 
     def gains(self, name: str) -> tuple[float, float, float]:
         """(held-out gain, training-rollout gain, held-out improvement in m) of the candidate's trial."""
-        t, ref = self.trials[name], self.reference
+        return self._gains(self.trials[name])
+
+    def given_gain(self, name: str) -> float:
+        """Held-out gain of the trial given the truth `name`."""
+        return self._gains(self.given[name])[0]
+
+    def _gains(self, t: Trial) -> tuple[float, float, float]:
+        ref = self.reference
         return (1.0 - t.heldout_l2 / ref.heldout_l2, 1.0 - t.train_l2 / ref.train_l2, ref.heldout_l2 - t.heldout_l2)
 
     def to_json(self) -> dict:
-        trials = {}
-        for n, t in self.trials.items():
-            held, train, _ = self.gains(n)
-            trials[n] = {"heldout_l2": t.heldout_l2, "train_rollout_l2": t.train_l2, "heldout_gain": held,
-                         "train_rollout_gain": train, "refit": t.values, "form": t.form or None}
+        def entry(t: Trial) -> dict:
+            held, train, _ = self._gains(t)
+            return {"heldout_l2": t.heldout_l2, "train_rollout_l2": t.train_l2, "heldout_gain": held,
+                    "train_rollout_gain": train, "refit": t.values, "form": t.form or None}
+
         return {"train": self.train, "heldout": self.heldout, "heldout_l2_before": self.reference.heldout_l2,
-                "train_rollout_l2_before": self.reference.train_l2, "trials": trials}
+                "train_rollout_l2_before": self.reference.train_l2,
+                "trials": {n: entry(t) for n, t in self.trials.items()},
+                "given_truth": {n: entry(t) for n, t in self.given.items()}}
 
 
 def extra_splits(train: list[str], heldout: list[str]) -> list[tuple[list[str], list[str]]]:
@@ -156,8 +167,16 @@ class CrossValidation:
                 return [n] + [m for m in ranked if m != n]
         return ranked
 
+    def given_mean_gain(self, name: str) -> float | None:
+        """Mean held-out gain over the folds of the trial given the truth `name`; None unless every fold has it."""
+        if not all(name in f.given for f in self.folds):
+            return None
+        return float(np.mean([f.given_gain(name) for f in self.folds]))
+
     def to_json(self) -> dict:
         names = sorted({n for f in self.folds for n in f.trials})
+        given = sorted({n for f in self.folds for n in f.given})
         return {"folds": [f.to_json() for f in self.folds],
                 "candidates": {n: dict(zip(("heldout_gain", "train_rollout_gain"), self.mean_gains(n)),
-                                       folds=self.count(n)) for n in names}}
+                                       folds=self.count(n)) for n in names},
+                "given_truth": {n: {"heldout_gain": self.given_mean_gain(n)} for n in given}}

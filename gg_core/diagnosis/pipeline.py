@@ -282,10 +282,10 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     t0 = time.perf_counter()
     final = finalists(first, req.min_gain, req.fold_finalists)
     folds = [first]
-    if final:
+    if final or req.reference:   # benchmarks: how much the true effect gains over the folds, named or not
         fold_jobs = [_FoldJob(req, [o for o in train + heldout if o.name in fit_on],
                               [o for o in train + heldout if o.name in held], faces, body_faces, attached, hands, rest,
-                              final, {n: contexts[n].region for n in final})
+                              final, {n: contexts[n].region for n in final}, reference_region)
                      for fit_on, held in extra_splits(first.train, first.heldout)]
         folds += run_jobs(_run_fold, fold_jobs, worker_count(req.workers, len(fold_jobs)), progress)
     for fold in folds[1:]:
@@ -320,6 +320,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     for n in req.reference:
         reference[n] = _reference_trial(BY_NAME[n], sim, r, reference_region, req, train, heldout, attached)
         progress.step(f"reference trial {n}: held-out L2 {reference[n].heldout_l2 * 1e3:.1f} mm")
+    first.given.update(reference)
     timings["reference_s"] = time.perf_counter() - t0
     baseline = {k: v for k, v in params.global_values().items()}
     baseline.update({f"{t.name}.{k}": float(t.params[k]) for t, k, _ in params.term_refs})
@@ -584,7 +585,8 @@ def _regressed(cand: Candidate, ctx: Context, r: Measured, probes: list[tuple[fl
 @dataclass
 class _FoldJob:
     """One more fold of the cross-validation (folds.py) for a worker process: everything refitted on `train`
-    without `heldout`; the finalists tried on the regions fold 0 chose."""
+    without `heldout`; the finalists tried on the regions fold 0 chose, the `reference` candidates (benchmarks: the
+    true effect) on `reference_region`."""
     req: DiagnoseRequest
     train: list[Observed]
     heldout: list[Observed]
@@ -595,11 +597,13 @@ class _FoldJob:
     rest: np.ndarray
     names: list[str]
     regions: dict[str, np.ndarray | None]
+    reference_region: np.ndarray | None
 
 
 def _run_fold(job: _FoldJob, step: Step) -> Fold:
-    """The baseline, residual and regression of this fold's training sequences, the refit without candidates and
-    each finalist's trial (from its regression start, or its probe sizes: _trial_from_starts)."""
+    """The baseline, residual and regression of this fold's training sequences, the refit without candidates,
+    each finalist's trial (from its regression start, or its probe sizes: _trial_from_starts) and each reference
+    candidate's (_reference_trial)."""
     req, held = job.req, ", ".join(o.name for o in job.heldout)
     sim, params, _, _, train_l2 = _baseline(req, job.train, job.faces, job.body_faces, job.attached, job.hands,
                                             job.rest, lambda message: step(f"{message}, without {held}"))
@@ -616,5 +620,10 @@ def _run_fold(job: _FoldJob, step: Step) -> Fold:
         trials[n] = _trial_from_starts(cand, coefs, sim, ctx, job.train, job.heldout, job.attached, config,
                                        req.probe_acceleration)
         step(f"trial {n} without {held}: held-out L2 {baseline_l2 * 1e3:.1f} -> {trials[n].heldout_l2 * 1e3:.1f} mm")
+    given = {}
+    for n in req.reference:
+        given[n] = _reference_trial(BY_NAME[n], sim, r, job.reference_region, req, job.train, job.heldout,
+                                    job.attached)
+        step(f"reference trial {n} without {held}: held-out L2 {given[n].heldout_l2 * 1e3:.1f} mm")
     return Fold([o.name for o in job.train], [o.name for o in job.heldout],
-                judge_reference(Trial([], baseline_l2, float("nan"), train_l2), null_refit), trials)
+                judge_reference(Trial([], baseline_l2, float("nan"), train_l2), null_refit), trials, given)

@@ -244,7 +244,8 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     reference_region = np.load(req.reference_region) if req.reference_region else None
     result = diagnose(req, train, heldout, faces, inputs.body_faces, inputs.attached,
                       hand_mask(train[0].body.shape[1]), reference_region, inputs.rest,
-                      Progress(STAGE, 10 + req.max_trials + len(req.reference) + len(train) * (1 + req.fold_finalists),
+                      Progress(STAGE, 10 + req.max_trials + len(req.reference)
+                               + len(train) * (1 + req.fold_finalists + len(req.reference)),
                                req.progress))
     mesh_log, denoised = inputs.mesh_log, inputs.denoised
 

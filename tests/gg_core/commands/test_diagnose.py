@@ -17,7 +17,7 @@ from diagnosis_helpers import write_blender_layout_capture, write_sim_capture  #
 
 from gg_core.cli import main  # noqa: E402
 from gg_core.commands.bench_diagnose import (BLENDER_DEFAULT_STEPS, CLOTH_STEPS, capture_of,  # noqa: E402
-                                             case_name, confusion, effect_params, parameter_error,
+                                             case_name, confusion, effect_params, fold_gains, parameter_error,
                                              parameter_errors, region_overlap, summarize, true_model_l2,
                                              truth_parameters)
 from gg_core.diagnosis.blender_units import WIND_COEF  # noqa: E402
@@ -125,11 +125,12 @@ def test_bench_scoring():
               "resolved_by_reference": False, "rollouts_first": None},
              {"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
               "cross_validated_gain": 0.3, "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01,
-              "true_effect_l2": 0.006,
+              "true_effect_l2": 0.006, "cross_validated_true_effect_gain": 0.32,
+              "cross_validated_gap_closed": 0.3 / 0.32,
               "resolved_by_reference": True, "rollouts_first": "wind", "true_model_gap_closed": 0.7},
              {"true_class": "wind", "predicted": "gravity", "correct": False, "heldout_gain": 0.1,
               "cross_validated_gain": 0.2, "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01,
-              "true_effect_l2": 0.0095,
+              "true_effect_l2": 0.0095, "cross_validated_true_effect_gain": 0.04, "cross_validated_gap_closed": 5.0,
               "resolved_by_reference": False, "rollouts_first": None}]
     summary = summarize(cases, min_gain=0.1)
     assert summary["accuracy_effect_present"] == 0.5 and summary["false_alarm_rate_none"] == 0.0
@@ -140,11 +141,31 @@ def test_bench_scoring():
     assert summary["median_parameter_error"] == pytest.approx(0.1) and summary["median_gap_closed"] == 0.6
     assert summary["median_true_model_gap_closed"] == 0.7      # only captures of our simulator have a true model
     assert summary["mean_cross_validated_gain_when_named"] == pytest.approx(0.3)   # the wrongly named one not
+    assert summary["median_cross_validated_gap_closed"] == pytest.approx(0.3 / 0.32)   # nor here
+    assert summary["mean_cross_validated_true_effect_gain"] == pytest.approx(0.18)   # whatever was named
     assert summary["residual_tie_breaks"] == 1 and summary["residual_tie_breaks_right"] == 1   # rollouts: wind
     table = confusion(cases).splitlines()
     assert table[0].split()[-3:] == ["gravity", "none", "wind"]
     assert [int(v) for v in table[-1].split()[1:]] == [1, 0, 0]      # wind named gravity
     assert np.isfinite(summary["mean_heldout_gain_when_named"])
+
+
+def test_fold_gains_give_the_named_and_the_true_effect_per_held_out_recording():
+    def trial(gain: float) -> dict:
+        return {"heldout_gain": gain}
+
+    report = {"cross_validation": {"folds": [
+        {"heldout": ["arm"], "trials": {"gravity_offset": trial(0.54), "wind": trial(0.35)},
+         "given_truth": {"gravity_offset": trial(0.54)}},
+        {"heldout": ["walk"], "trials": {"gravity_offset": trial(0.012)},
+         "given_truth": {"gravity_offset": trial(0.01)}},
+        {"heldout": ["twist"], "trials": {}, "given_truth": {}}]}}
+    assert fold_gains(report, "gravity_offset", "gravity_offset") == [
+        {"heldout": ["arm"], "named_gain": 0.54, "true_effect_gain": 0.54},
+        {"heldout": ["walk"], "named_gain": 0.012, "true_effect_gain": 0.01},
+        {"heldout": ["twist"], "named_gain": None, "true_effect_gain": None}]
+    assert [f["named_gain"] for f in fold_gains(report, None, "gravity_offset")] == [None] * 3   # nothing named
+    assert fold_gains({}, "wind", None) == []          # reports without folds
 
 
 def test_bench_captures_of_our_simulator_resimulate_the_blender_reference_of_their_seed(tmp_path):

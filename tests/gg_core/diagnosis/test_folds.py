@@ -5,6 +5,7 @@ import pytest
 
 from diagnosis_helpers import fold
 
+from gg_core.diagnosis.confirm import Trial
 from gg_core.diagnosis.folds import CrossValidation, extra_splits, finalists
 
 
@@ -102,3 +103,20 @@ def test_refit_ranges_span_the_folds_refits_per_component_without_the_material()
                                                            "anisotropic_stretch.k_weft": [1e4, 3e4],
                                                            "mass_damping.alpha": [12.0, 12.0],
                                                            "wind.pressure": [[2.0, 0.2, 0.5], [2.0, 0.2, 0.5]]}
+
+
+def test_trials_given_the_truth_are_reported_per_fold_and_never_named():
+    # Blender's hidden gravity tilt (session 30): the walk held out barely shows the tilt, even given the truth
+    folds = [fold("arm", (0.010, 0.010), tilt=(0.005, 0.008)), fold("walk", (0.010, 0.010), tilt=(0.0098, 0.008)),
+             fold("twist", (0.010, 0.010), tilt=(0.006, 0.008))]
+    for f, true in zip(folds, (0.005, 0.0099, 0.006)):
+        f.given["gravity_offset"] = Trial(["gravity_offset"], true, 1.0, 0.008)
+    cv = CrossValidation(folds)
+    assert cv.given_mean_gain("gravity_offset") == pytest.approx((0.5 + 0.01 + 0.4) / 3)
+    assert folds[1].given_gain("gravity_offset") == pytest.approx(0.01)
+    assert cv.count("gravity_offset") == 0 and not cv.confirmed("gravity_offset", 0.1, 0.25)
+    summary = cv.to_json()
+    assert summary["folds"][1]["given_truth"]["gravity_offset"]["heldout_gain"] == pytest.approx(0.01)
+    assert summary["given_truth"]["gravity_offset"]["heldout_gain"] == pytest.approx(0.91 / 3)
+    del folds[2].given["gravity_offset"]
+    assert CrossValidation(folds).given_mean_gain("gravity_offset") is None     # over every fold or not at all

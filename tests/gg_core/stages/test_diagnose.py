@@ -57,10 +57,17 @@ def test_hidden_gravity_tilt_is_named_refitted_and_improves_heldout(tilted, tmp_
 
 def test_nothing_hidden_gives_verdict_none(tmp_path):
     capture = write_sim_capture(tmp_path / "plain")
+    # as the benchmark asks: a "true effect" trialled whatever the selection says, in every fold, never named
     report = json.loads(run_diagnose(DiagnoseRequest(capture=capture, project=tmp_path / "p", workers=1,
-                                                     **FAST)).read_text())
+                                                     reference=["gravity_offset"], **FAST)).read_text())
     assert report["verdict"] == "none" and report["accepted"] == []
     assert report["heldout_l2_after"] == report["heldout_l2_before"]
+    folds = report["cross_validation"]["folds"]
+    assert [f["heldout"] for f in folds] == [["c"], ["a"], ["b"]]
+    assert all(set(f["given_truth"]) == {"gravity_offset"} for f in folds)
+    assert folds[0]["given_truth"]["gravity_offset"]["heldout_l2"] == \
+        report["reference_trials"]["gravity_offset"]["heldout_l2"]
+    assert report["cross_validation"]["given_truth"]["gravity_offset"]["heldout_gain"] < 0.1   # nothing to gain
 
 
 def test_registered_meshes_are_read_from_the_project(tilted, tmp_path):
