@@ -84,6 +84,7 @@ def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progre
                         and time.monotonic() - waiting.setdefault(future, time.monotonic()) < _GRACE_S):
                     continue
                 del pending[future]
+                waiting.pop(future, None)
                 if future.exception() is not None:
                     errors.append(future.exception())
                     continue

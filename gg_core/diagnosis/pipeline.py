@@ -316,10 +316,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     timings["joint_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    reference = {}
-    for n in req.reference:
-        reference[n] = _reference_trial(BY_NAME[n], sim, r, reference_region, req, train, heldout, attached)
-        progress.step(f"reference trial {n}: held-out L2 {reference[n].heldout_l2 * 1e3:.1f} mm")
+    reference = _reference_trials(req, sim, r, reference_region, train, heldout, attached, progress.step)
     first.given.update(reference)
     timings["reference_s"] = time.perf_counter() - t0
     baseline = {k: v for k, v in params.global_values().items()}
@@ -544,6 +541,17 @@ def _reference_trial(cand: Candidate, sim: ImplicitSimulator, r: Measured, regio
                                fit_config(req, req.refit_iterations))
 
 
+def _reference_trials(req: DiagnoseRequest, sim: ImplicitSimulator, r: Measured, region: np.ndarray | None,
+                      train: list[Observed], heldout: list[Observed], attached: np.ndarray, step: Step,
+                      split: str = "") -> dict[str, Trial]:
+    """_reference_trial of each of `req.reference`, each reported through `step` (`split` says which fold)."""
+    out = {}
+    for n in req.reference:
+        out[n] = _reference_trial(BY_NAME[n], sim, r, region, req, train, heldout, attached)
+        step(f"reference trial {n}{split}: held-out L2 {out[n].heldout_l2 * 1e3:.1f} mm")
+    return out
+
+
 @dataclass
 class Measured:
     """The residual of a fitted simulator on training sequences, pooled, with the nuisance columns it is regressed
@@ -620,10 +628,7 @@ def _run_fold(job: _FoldJob, step: Step) -> Fold:
         trials[n] = _trial_from_starts(cand, coefs, sim, ctx, job.train, job.heldout, job.attached, config,
                                        req.probe_acceleration)
         step(f"trial {n} without {held}: held-out L2 {baseline_l2 * 1e3:.1f} -> {trials[n].heldout_l2 * 1e3:.1f} mm")
-    given = {}
-    for n in req.reference:
-        given[n] = _reference_trial(BY_NAME[n], sim, r, job.reference_region, req, job.train, job.heldout,
-                                    job.attached)
-        step(f"reference trial {n} without {held}: held-out L2 {given[n].heldout_l2 * 1e3:.1f} mm")
+    given = _reference_trials(req, sim, r, job.reference_region, job.train, job.heldout, job.attached, step,
+                              f" without {held}")
     return Fold([o.name for o in job.train], [o.name for o in job.heldout],
                 judge_reference(Trial([], baseline_l2, float("nan"), train_l2), null_refit), trials, given)
