@@ -233,7 +233,8 @@ def summary(report: dict) -> str:
     error (each alone, as the mean over the folds where it was cross-validated, or together where two were
     accepted: the joint refit is what was confirmed), the form it was refitted in where the candidate has several
     (library.Form), and the candidate it was chosen over where the rollouts tied
-    (folds.CrossValidation.residual_tie_break)."""
+    (folds.CrossValidation.residual_tie_break) or, where nothing chose, the rivals it was not told from
+    (pipeline.unresolved)."""
     if report.get("verdict") != "missing":
         return "Nothing missing: the simulator explains the recordings"
     accepted = report.get("accepted", [])
@@ -244,8 +245,9 @@ def summary(report: dict) -> str:
     def gain(name: str) -> str:
         effect = effects.get(name, {})
         cv = effect.get("cross_validated") or {}
+        rivals = effect.get("not_separated_from") or []
         over = f"; chosen over {effect['residual_chose_over']} by the residual" if effect.get("residual_chose_over") \
-            else ""
+            else (f"; {' or '.join(rivals)} fits as well" if rivals else "")
         label = f"{name} as {effect['form']}" if effect.get("form") else name
         if cv.get("complete"):
             return f"{label} (held-out error {-cv['heldout_gain']:+.0%}, mean of {cv['folds']} folds{over})"

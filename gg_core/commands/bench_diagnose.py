@@ -268,6 +268,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         "correct": predicted == true_class,
         "proposed": report["selection"]["order"],
         "rollouts_first": report.get("cross_validation", {}).get("rollouts_first"),   # where the residual overruled
+        "not_separated_from": accepted.get("not_separated_from", []) if accepted else [],   # the class left open
         "implausible": [e["name"] for e in report["effects"] if e.get("implausible")],
         "heldout_l2_before": before, "heldout_l2_after": after, "heldout_gain": 1.0 - after / before,
         "cross_validated_gain": cv_gain,
@@ -373,6 +374,8 @@ def run(args: argparse.Namespace) -> int:
                              f" ({-case['cross_validated_gain']:+.0%} over the folds)")
                           + ("" if not case["rollouts_first"] else
                              f" (the rollouts led with {case['rollouts_first']}, the residual chose)")
+                          + ("" if not case["not_separated_from"] else
+                             f" (not separated from {' or '.join(case['not_separated_from'])})")
                           + ("" if case["true_effect_l2"] is None else
                              f", true effect {case['true_effect_l2'] * 1e3:.1f} mm")
                           + ("" if case["cross_validated_true_effect_gain"] is None else

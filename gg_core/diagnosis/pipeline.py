@@ -45,6 +45,14 @@ BASELINE_FIT = ("collision.margin", "viscoelastic_damping.tau")
 # became a false alarm: mass damping -13.7 % held-out (mu 0.05: -13.2 %), where mu 0.5 answers "none". The
 # friction's dissipation is part of what this baseline needs. Our friction cannot show Blender's anyway: it moves
 # the hip band by 0.3-1.7 mm (5-14 mm at the hem is that twist swung out) and refits to mu 0.007 / 0.04.
+# named_first: the share of bootstrap replicates in which a rival the folds do not separate from the rollouts' first
+# must explain more of the residual alone than it, where the selection chose neither (a one-sided paired test).
+# Measured (session 33, tilt against wind, 1000 replicates; the diagnosis draws 100): the demo capture's registered
+# meshes with a hidden tilt, nothing selected, 0.97 for the tilt (0.96 with the diagnosis's 100; the rollouts led
+# with wind by half a point). Where the selection chose one: for the tilt Blender's s1 / s2 0.79 / 1.0, our
+# simulator's s2 at 1.5 mm 0.947, the demo capture's ground truth 0.997; Blender wind s1 0.90 for wind, but Blender
+# wind s2 0.87 for the tilt, a wrong pattern: short of 0.95 the residual's preference is no evidence.
+RESIDUAL_PREFERENCE = 0.95
 MARGIN_STARTS = (1.0, 3.0)     # baseline fits start from the collision term's default margin times these
 INITIAL_LOSS_FACTOR = 0.1      # internal damping starts at a typical fabric's loss factor at 1 Hz
 
@@ -69,6 +77,7 @@ class Result:
     scans: dict[str, ScanResult] = field(default_factory=dict)   # region candidates that found their own region
     withheld: dict[str, str] = field(default_factory=dict)       # candidates not tried on these data, and why
     rollouts_first: str | None = None  # the rollouts' first choice where the residual named another (tie-break)
+    unseparated: list[str] = field(default_factory=list)   # unresolved rivals of the one accepted (unresolved)
 
     def region_of(self, name: str) -> np.ndarray | None:
         """The region candidate `name` acted on: its scan's, or the localization's."""
@@ -135,6 +144,9 @@ class Result:
                 "train_rollout_gain": None if t is None else self.train_gain(t),
                 "cross_validated": self.cross_validated(n),
                 "residual_chose_over": self.rollouts_first if self.accepted[:1] == [n] else None,
+                "residual_preference": self.selection.preference(n, self.rollouts_first)
+                if self.rollouts_first and self.accepted[:1] == [n] else None,
+                "not_separated_from": self.unseparated if self.accepted == [n] else [],
                 "implausible": self.unphysical.get(n),
             })
         return out
@@ -296,6 +308,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     by_rollouts = cv.ranked([n for n in first.trials if cv.confirmed(n, req.min_gain, req.min_gain_mm)
                              and n not in unphysical])
     passing = named_first(cv, by_rollouts, sel, req.min_inclusion)
+    rollouts_first = by_rollouts[0] if by_rollouts and passing[0] != by_rollouts[0] else None
     timings["folds_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -324,9 +337,10 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     baseline["heldout_l2_global_fit"] = baseline_l2
     baseline["internal_damping_loss_factor"] = 2.0 * np.pi * baseline["viscoelastic_damping.tau"]   # at 1 Hz
     baseline.update(starts)
+    rivals = unresolved(cv, passing) if len(accepted) == 1 and not rollouts_first else []
     return Result(loc, sel, trials, accepted, null, null_refit, after, baseline,
                   dict(zip(r.labels, r.adjust.tolist())), r.batch, unphysical, progress, cv, reference, timings, scans,
-                  withheld, by_rollouts[0] if by_rollouts and passing[0] != by_rollouts[0] else None)
+                  withheld, rollouts_first, rivals)
 
 
 def usable_candidates(rest_given: bool) -> tuple[list[Candidate], dict[str, str]]:
@@ -398,8 +412,32 @@ def named_first(cv: CrossValidation, by_rollouts: list[str], sel: Selection, min
     (inclusion 0.4, 7.4 % of the residual explained) over the tilt (0.3, 7.1 %); the tilt led the rollouts (mean
     held-out gain 36 % against 25 %, better in 2 folds by 18 and 16 points, worse in the walk-less fold by 10),
     and breaking that tie with the explained share named wind, a wrong class. The case the tie-break was made for
-    (Blender's hidden wind, seed 2) had wind selected in 100 % of the bootstrap replicates, the tilt in 5 %."""
-    return cv.residual_tie_break(by_rollouts, selected(sel, min_inclusion))
+    (Blender's hidden wind, seed 2) had wind selected in 100 % of the bootstrap replicates, the tilt in 5 %.
+
+    Where the selection chose neither the rollouts' first nor a rival the folds do not separate from it, the rival
+    still comes first if it explains more of the residual alone in at least RESIDUAL_PREFERENCE of the bootstrap
+    replicates (Selection.preference): registration error lowers every candidate's share below the selection's
+    bar together, the paired comparison keeps which pattern fits better. See RESIDUAL_PREFERENCE."""
+    chosen = selected(sel, min_inclusion)
+    ranked = cv.residual_tie_break(by_rollouts, chosen)
+    if not ranked or ranked[0] != by_rollouts[0] or ranked[0] in chosen:
+        return ranked
+    lead = ranked[0]
+    rivals = [n for n in ranked[1:] if not cv.separated(lead, n) and sel.preference(n, lead) >= RESIDUAL_PREFERENCE]
+    if not rivals:
+        return ranked
+    first = max(rivals, key=lambda n: sel.preference(n, lead))
+    return [first] + [n for n in ranked if n != first]
+
+
+def unresolved(cv: CrossValidation, passing: list[str]) -> list[str]:
+    """The confirmed candidates of other equivalence classes than the first of `passing` that the folds do not
+    separate from it (CrossValidation.separated): where neither the rollouts nor the residual chose, the report
+    says the recordings leave the class open instead of naming one as if it were certain."""
+    if not passing:
+        return []
+    lead = BY_NAME[passing[0]]
+    return [n for n in passing[1:] if BY_NAME[n].equivalence != lead.equivalence and not cv.separated(lead.name, n)]
 
 
 def propose(sel: Selection, min_inclusion: float, max_trials: int) -> list[str]:

@@ -109,7 +109,18 @@ def sentence(effect: dict, before: float) -> str:
             f"{effect['evidence']['where'].replace('_', ' ')} is high and in frames with high "
             f"{effect['evidence']['when'].replace('_', ' ')}. With it, the held-out rollout error goes from "
             f"{before * 1e3:.1f} mm to {effect['heldout_l2'] * 1e3:.1f} mm ({effect['heldout_gain']:+.0%} gain)"
-            + cross_validated_phrase(effect) + residual_choice_phrase(effect) + ".")
+            + cross_validated_phrase(effect) + residual_choice_phrase(effect) + unresolved_phrase(effect) + ".")
+
+
+def unresolved_phrase(effect: dict) -> str:
+    """Where confirmed effects of another class roll the recordings out about as well and the residual did not
+    choose between them (pipeline.unresolved): the recordings leave the class open."""
+    others = effect.get("not_separated_from") or []
+    if not others:
+        return ""
+    names = " or ".join(o.replace("_", " ") for o in others)
+    return (f"; {names} rolls the recordings out about as well (better in at least one fold) and the residual "
+            f"forces do not choose between them: these recordings do not tell which one is missing")
 
 
 def residual_choice_phrase(effect: dict) -> str:
@@ -118,8 +129,10 @@ def residual_choice_phrase(effect: dict) -> str:
     other = effect.get("residual_chose_over")
     if not other:
         return ""
+    share = effect.get("residual_preference")
     return (f"; {other.replace('_', ' ')} rolls the recordings out about as well (not better in every fold), and "
-            f"the pattern of the residual forces chose {effect['name'].replace('_', ' ')}")
+            f"the pattern of the residual forces chose {effect['name'].replace('_', ' ')}"
+            + ("" if share is None else f" (it explains more of them in {share:.0%} of the bootstrap replicates)"))
 
 
 def cross_validated_phrase(effect: dict) -> str:

@@ -121,6 +121,16 @@ class Selection:
     alone: dict[str, np.ndarray]                         # each candidate alone (a single-candidate trial's start)
     inclusion: dict[str, float] = field(default_factory=dict)
     interval: dict[str, np.ndarray] = field(default_factory=dict)   # [K,2] 5th / 95th bootstrap percentiles
+    shares: dict[str, np.ndarray] = field(default_factory=dict)     # [B] `explained` in each bootstrap replicate
+
+    def preference(self, first: str, other: str) -> float:
+        """Share of the bootstrap replicates in which `first` alone explains more of the residual than `other`
+        alone: a paired comparison, so what moves both (how much of the residual is registration error in the
+        resampled blocks) cancels, where each share's own interval does not. 0.5 without replicates."""
+        a, b = self.shares.get(first), self.shares.get(other)
+        if a is None or b is None or not len(a):
+            return 0.5
+        return float(np.mean(a > b))
 
 
 def select(design: Design, candidates: dict[str, Candidate], min_gain: float, n_boot: int = 100,
@@ -138,13 +148,18 @@ def select(design: Design, candidates: dict[str, Candidate], min_gain: float, n_
     rng = np.random.default_rng(seed)
     hits = {n: 0 for n in design.blocks}
     draws: dict[str, list[np.ndarray]] = {n: [] for n in design.blocks}
+    shares: dict[str, list[float]] = {n: [] for n in design.blocks}
     for _ in range(n_boot):
         counts = np.bincount(rng.integers(0, len(blocks), len(blocks)), minlength=len(blocks))
         sample = full.reweighted(parts, counts)
         for n in forward(sample, candidates, min_gain)[0]:
             hits[n] += 1
+        nuisance_rss = fit(sample, [], candidates).rss
         for n in design.blocks:
             draws[n].append(fit(sample, context[n], candidates).coefs[n])
+            alone = fit(sample, [n], candidates).rss
+            shares[n].append(1.0 - alone / nuisance_rss if nuisance_rss > 0 else 0.0)
+    sel.shares = {n: np.array(v) for n, v in shares.items()}
     sel.inclusion = {n: hits[n] / max(n_boot, 1) for n in design.blocks}
     sel.interval = {n: np.percentile(np.stack(d), [5, 95], axis=0).T if d else np.full((len(sel.coefs[n]), 2),
                                                                                         np.nan)

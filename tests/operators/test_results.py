@@ -137,6 +137,13 @@ def test_residual_map_colours_the_garment_and_states_the_verdict(blender, tmp_pa
     assert blender.ops.gg.show_residuals() == {"FINISHED"}
     assert blender.context.scene.gg.diagnosis == ("Missing physics: mass_damping (held-out error -21%, mean of 3 "
                                                   "folds; chosen over gravity_offset by the residual)")
+    del report["effects"][0]["residual_chose_over"]
+    report["effects"][0]["not_separated_from"] = ["gravity_offset"]      # the rollouts tied and nothing chose
+    _write_diagnosis(tmp_path / "open", report, np.array([0.0, 1.0, 2.0, 4.0]))
+    blender.context.scene.gg.project_path = str(tmp_path / "open")
+    assert blender.ops.gg.show_residuals() == {"FINISHED"}
+    assert blender.context.scene.gg.diagnosis == ("Missing physics: mass_damping (held-out error -21%, mean of 3 "
+                                                  "folds; gravity_offset fits as well)")
     report["effects"] = [{"name": "wind", "form": "moving air", "heldout_gain": 0.35}]    # refitted in another form
     report["accepted"] = ["wind"]
     _write_diagnosis(tmp_path / "form", report, np.array([0.0, 1.0, 2.0, 4.0]))

@@ -91,6 +91,22 @@ def test_the_residual_breaks_a_tie_the_folds_do_not_separate():
     assert clear.residual_tie_break(["air", "wind"], ["wind", "air"]) == ["air", "wind"]
 
 
+
+def test_a_fold_whose_heldout_recording_neither_candidate_improves_does_not_count_against_separation():
+    # Blender's hidden wind (seed 2, 20 steps, session 33): wind beats the tilt in the arm-swing and twist folds;
+    # without the walk both make the walk worse, the tilt less so
+    cv = CrossValidation([fold("arm", (0.0100, 0.0100), wind=(0.00708, 0.00767), tilt=(0.0076, 0.00796)),
+                          fold("walk", (0.0100, 0.0100), wind=(0.01073, 0.00637), tilt=(0.01043, 0.00726)),
+                          fold("twist", (0.0100, 0.0100), wind=(0.00821, 0.00859), tilt=(0.00861, 0.00868))])
+    assert cv.separated("wind", "tilt") and not cv.separated("tilt", "wind")
+    assert cv.residual_tie_break(["wind", "tilt"], ["tilt"]) == ["wind", "tilt"]   # the residual's choice has no say
+    one = CrossValidation(cv.folds[1:])                 # a single fold where either helps: no sign test
+    assert not one.separated("wind", "tilt")
+    worse = CrossValidation([fold(h, (0.010, 0.010), wind=(0.011, 0.008), tilt=(0.012, 0.009))
+                             for h in ("arm", "walk", "twist")])
+    assert not worse.separated("wind", "tilt")          # neither helps any held-out recording
+
+
 def test_refit_ranges_span_the_folds_refits_per_component_without_the_material():
     folds = [fold(held, (0.01, 0.01), wind=(0.008, 0.008)) for held in ("arm", "walk", "twist")]
     for one, alpha, push in zip(folds, (7.9, 12.7, 12.0), ((1.0, 0.0, 2.0), (3.0, 0.5, 1.0), (2.0, 0.2, 0.5))):

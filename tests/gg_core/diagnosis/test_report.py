@@ -45,6 +45,13 @@ def test_sentence_and_page(tmp_path):
     tie = sentence({**EFFECT, "name": "wind", "residual_chose_over": "gravity_offset"}, 0.012)
     assert tie.endswith("; gravity offset rolls the recordings out about as well (not better in every fold), and the "
                         "pattern of the residual forces chose wind.")
+    open_class = sentence({**EFFECT, "name": "wind", "not_separated_from": ["gravity_offset"]}, 0.012)
+    assert open_class.endswith("; gravity offset rolls the recordings out about as well (better in at least one fold) "
+                               "and the residual forces do not choose between them: these recordings do not tell "
+                               "which one is missing.")
+    paired = sentence({**EFFECT, "residual_chose_over": "wind", "residual_preference": 0.97}, 0.012)
+    assert paired.endswith("the pattern of the residual forces chose gravity offset (it explains more of them in 97% "
+                           "of the bootstrap replicates).")
     v, f = sheet(4, 4, 0.5, 0.5)
     report = {"verdict": "missing", "accepted": ["gravity_offset"], "effects": [EFFECT],
               "heldout_l2_before": 0.012, "heldout_l2_after": 0.006, "outputs": {},

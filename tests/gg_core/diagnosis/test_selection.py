@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gg_core.diagnosis.library import BY_NAME
-from gg_core.diagnosis.selection import Design, fit, forward, gram, select
+from gg_core.diagnosis.selection import Design, Selection, fit, forward, gram, select
 
 
 def design(effects: dict[str, np.ndarray], rows: int = 1200, noise: float = 1.0, seed: int = 0) -> Design:
@@ -53,3 +53,17 @@ def test_gram_of_blocks_sums_to_the_full_gram():
     parts = [gram(d, d.groups == b, full.scale) for b in np.unique(d.groups)]
     summed = full.reweighted(parts, np.ones(len(parts)))
     assert np.allclose(summed.xx, full.xx) and np.allclose(summed.xy, full.xy) and summed.yy == pytest.approx(full.yy)
+
+
+def test_paired_bootstrap_prefers_the_true_pattern_where_neither_share_clears_the_bar():
+    # registered meshes: every share falls below min_gain together; the rival's columns only half match the truth's
+    d = design({}, seed=2)
+    tilt = d.blocks["gravity_offset"]
+    d.blocks["wind"] = tilt + np.random.default_rng(102).normal(size=tilt.shape)
+    d.y += tilt @ np.array([0.15, 0.1])
+    sel = select(d, BY_NAME, min_gain=0.05, n_boot=100)
+    assert sel.order == [] and sel.explained["wind"] < sel.explained["gravity_offset"] < 0.05
+    assert len(sel.shares["wind"]) == 100
+    assert sel.preference("gravity_offset", "wind") >= 0.95 and sel.preference("wind", "gravity_offset") <= 0.05
+    assert sel.preference("air_drag", "wind") < 0.5                  # explains nothing: never ahead
+    assert Selection(1.0, [], {}, {}, {}).preference("wind", "air_drag") == 0.5   # no replicates, no preference
