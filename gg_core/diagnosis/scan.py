@@ -33,7 +33,7 @@ import numpy as np
 from .library import Candidate, Context
 from .localize import REGION_MAX_FRACTION
 from .residuals import Pooling, responses
-from .selection import Design, fit, gram
+from .selection import Design, explained_share, fit, gram
 
 GROWTH_SHARE = 0.01     # share of the residual a neighbouring patch must add to join the region
 # share the best patch must explain for the scan to propose a region at all: as little as a patch must add to
@@ -68,7 +68,7 @@ def _share(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.nda
            base: float) -> float:
     """Share of the nuisance-only residual sum of squares `base` that `columns` remove next to the nuisance."""
     g = gram(Design(y, nuisance, {cand.name: columns}, groups))
-    return 0.0 if base <= 0 else 1.0 - fit(g, [cand.name], {cand.name: cand}).rss / base
+    return 0.0 if base <= 0 else explained_share(fit(g, [cand.name], {cand.name: cand}).rss, base)
 
 
 def grow(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarray, groups: np.ndarray,

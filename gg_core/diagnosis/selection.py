@@ -133,6 +133,11 @@ class Selection:
         return float(np.mean(a > b))
 
 
+def explained_share(rss: float, nuisance_rss: float) -> float:
+    """Share of the nuisance-only residual sum of squares a fit removes (0 where there is none to remove)."""
+    return 1.0 - rss / nuisance_rss if nuisance_rss > 0 else 0.0
+
+
 def select(design: Design, candidates: dict[str, Candidate], min_gain: float, n_boot: int = 100,
            seed: int = 0) -> Selection:
     full = gram(design)
@@ -140,7 +145,7 @@ def select(design: Design, candidates: dict[str, Candidate], min_gain: float, n_
     alone = {n: fit(full, [n], candidates) for n in design.blocks}
     # coefficients (and their intervals) next to the selected terms, so they are not biased by an omitted effect
     context = {n: [m for m in order if m != n] + [n] for n in design.blocks}
-    sel = Selection(base, order, {n: 1.0 - f.rss / base if base > 0 else 0.0 for n, f in alone.items()},
+    sel = Selection(base, order, {n: explained_share(f.rss, base) for n, f in alone.items()},
                     {n: fit(full, context[n], candidates).coefs[n] for n in design.blocks},
                     {n: f.coefs[n] for n, f in alone.items()})
     blocks = np.unique(design.groups)
@@ -152,13 +157,14 @@ def select(design: Design, candidates: dict[str, Candidate], min_gain: float, n_
     for _ in range(n_boot):
         counts = np.bincount(rng.integers(0, len(blocks), len(blocks)), minlength=len(blocks))
         sample = full.reweighted(parts, counts)
-        for n in forward(sample, candidates, min_gain)[0]:
+        chosen, nuisance_rss = forward(sample, candidates, min_gain)
+        for n in chosen:
             hits[n] += 1
-        nuisance_rss = fit(sample, [], candidates).rss
         for n in design.blocks:
-            draws[n].append(fit(sample, context[n], candidates).coefs[n])
-            alone = fit(sample, [n], candidates).rss
-            shares[n].append(1.0 - alone / nuisance_rss if nuisance_rss > 0 else 0.0)
+            beside = fit(sample, context[n], candidates)
+            draws[n].append(beside.coefs[n])
+            own = beside if context[n] == [n] else fit(sample, [n], candidates)
+            shares[n].append(explained_share(own.rss, nuisance_rss))
     sel.shares = {n: np.array(v) for n, v in shares.items()}
     sel.inclusion = {n: hits[n] / max(n_boot, 1) for n in design.blocks}
     sel.interval = {n: np.percentile(np.stack(d), [5, 95], axis=0).T if d else np.full((len(sel.coefs[n]), 2),
