@@ -161,6 +161,7 @@ class Candidate:
     rollout_values: tuple[float, ...] = ()   # coefficients also tried on training rollouts (confirm.trial)
     needs_unloaded_rest: bool = False        # tried only against a given rest mesh (pipeline.usable_candidates)
     forms: tuple[Form, ...] = ()             # alternative models of the same coefficients
+    horizontal: bool = False                 # the coefficients are (x, z) of one horizontal vector
 
     def form(self, label: str) -> Form | None:
         return next((f for f in self.forms if f.label == label), None)
@@ -339,7 +340,7 @@ CANDIDATES: tuple[Candidate, ...] = (
               "vertical pressure is weight on the upward-facing cloth, left to the material and nuisance fits)",
               ("pressure_x", "pressure_z"), "Pa", (-np.inf, np.inf),
               _horizontal_columns("wind_pressure", "pressure"), _horizontal_term("wind_pressure", "pressure"),
-              forms=(MOVING_AIR,)),
+              forms=(MOVING_AIR,), horizontal=True),
     Candidate("mass_damping", "linear_damping",
               "extra linear damping -alpha m v (Rayleigh mass damping, the same as linear isotropic air drag for "
               "uniform density): everywhere, in all directions, proportional to speed",
@@ -365,7 +366,7 @@ CANDIDATES: tuple[Candidate, ...] = (
               "vertical part is confounded with the rest frame's prestress and left to the nuisance fit)",
               ("delta_g_x", "delta_g_z"), "m/s^2", (-np.inf, np.inf),
               _horizontal_columns("gravity_offset", "delta_g"), _horizontal_term("gravity_offset", "delta_g"),
-              plausibility=_gravity_tilt),
+              plausibility=_gravity_tilt, horizontal=True),
     _region_candidate("heavy_region", "heavy_region",
                       "a heavier region (relative density increase s): static sag and inertial lag on that region",
                       ("density",), ("density_change",), (-0.9, 10.0)),

@@ -249,7 +249,13 @@ def _baseline_paragraph(baseline: dict) -> str:
                                                             "viscoelastic_damping.tau") if k in baseline)
     eta = baseline.get("internal_damping_loss_factor")
     damping = "" if eta is None else f" The fitted internal damping has a loss factor of {eta:.2g} at 1 Hz."
-    return f"<p>Baseline (global parameters only, SI units): {html.escape(fitted)}.{damping}</p>"
+    lag = ""
+    if "train_rollout_lag_x_mm" in baseline:
+        lag = (f" Its free rollouts of the training sequences leave the recordings "
+               f"{baseline['train_rollout_lag_x_mm']:.1f} mm along x and {baseline['train_rollout_lag_z_mm']:.1f} mm "
+               f"along z on average (where a steady sideways force would hold the garment; tilt and wind trials also "
+               f"start along it).")
+    return f"<p>Baseline (global parameters only, SI units): {html.escape(fitted)}.{damping}{lag}</p>"
 
 
 def _pct(gain: float | None) -> str:

@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
-from gg_core.diagnosis.confirm import CandidateParams, golden_section, rollout_choice, rollout_scale
+from gg_core.diagnosis import confirm
+from gg_core.diagnosis.confirm import (CandidateParams, golden_section, refit_or_scale, rollout_choice, rollout_scale,
+                                      scale_label)
 from gg_core.diagnosis.library import BY_NAME, Context
 from gg_core.physics.cloth import Cloth
 from gg_core.physics.contact import BodyCollider
-from gg_core.physics.fitting import Observed, rollout_error
+from gg_core.physics.fitting import FitConfig, Observed, rollout_error
 from gg_core.physics.forces import DEFAULT_TERMS, make_terms
+from gg_core.physics.material import MATERIAL_NAMES, Material, to_latent
 from gg_core.physics.simulator import ClothState, ImplicitSimulator
 
 from physics_helpers import sheet, uv_sphere
@@ -81,16 +85,93 @@ def test_a_tilt_the_refit_underestimates_is_scaled_on_training_rollouts():
     sim = _hanging(0.5)
     params = CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {})
     before = rollout_error(sim, observed, pinned)
-    error, label = rollout_scale(sim, params, 1, [observed], pinned, before)
+    error, factor = rollout_scale(sim, params, 1, [observed], pinned, before)
     tilt = next(t for t in sim.terms if t.name == "gravity_offset").params["delta_g"].tolist()
     assert tilt[0] == pytest.approx(2.0, rel=0.05) and tilt[1:] == [0.0, 0.0]
-    assert label.startswith("regression, rollout scale x4")
+    assert factor == pytest.approx(4.0, rel=0.05)
+    assert scale_label(factor).startswith(", rollout scale x4")
     assert error == pytest.approx(rollout_error(sim, observed, pinned)) and error < 0.1 * before
     assert next(t for t in sim.terms if t.name == "collision").params["margin"] == pytest.approx(
         next(t for t in truth.terms if t.name == "collision").params["margin"])     # only the candidate's scaled
     # at the truth no factor rolls out better: the refit's value stays
     params = CandidateParams(truth.cloth, truth, ("collision.margin", "gravity_offset.delta_g"), None, {})
     exact = rollout_error(truth, observed, pinned)
-    assert rollout_scale(truth, params, 1, [observed], pinned, exact) == (exact, "regression")
+    assert rollout_scale(truth, params, 1, [observed], pinned, exact) == (exact, 1.0)
     assert truth.terms[-1].params["delta_g"].tolist() == [2.0, 0.0, 0.0]
-    assert rollout_scale(truth, params, 2, [observed], pinned, exact) == (exact, "regression")   # nothing to scale
+    assert rollout_scale(truth, params, 2, [observed], pinned, exact) == (exact, 1.0)   # nothing to scale
+    assert scale_label(1.0) == ""
+
+
+def _refit_to(monkeypatch: pytest.MonkeyPatch, densities: list[float]) -> list[float]:
+    """Replace the trials' refit by one that sets the garment's density to the next of `densities` (what an
+    L-BFGS refit that moves the material would do); returns the tilt each call started from."""
+    starts = []
+
+    def fake(sim, params, train, trainable, config):
+        if trainable:
+            starts.append(float(params.term_refs[-1][0].params["delta_g"][0]))
+            with torch.no_grad():
+                params.global_z[MATERIAL_NAMES.index("density")] = to_latent("density", densities[len(starts) - 1])
+        params.apply(sim.cloth)
+        sim.refresh()
+        return float(len(starts))
+
+    monkeypatch.setattr(confirm, "refit", fake)
+    return starts
+
+
+def _tilted_fall() -> tuple[Observed, np.ndarray]:
+    truth = _hanging(2.0)
+    rest = truth.cloth.template
+    return (Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0),
+            truth.cloth.pinned)
+
+
+def _start(density: float) -> tuple[ImplicitSimulator, CandidateParams]:
+    """The tilt's trial from a quarter of the truth's 2 m/s^2 on a garment of the given density."""
+    sim = _hanging(0.5)
+    sim.cloth.material = Material.uniform(sim.cloth.n_vertices, density=density)
+    params = CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {})
+    params.apply(sim.cloth)
+    sim.refresh()
+    return sim, params
+
+
+def test_a_refit_that_spoils_the_rollouts_loses_to_the_unrefitted_start_and_is_restarted_from_it(monkeypatch):
+    observed, pinned = _tilted_fall()
+    true_density = float(_hanging(2.0).cloth.material.density[0])
+    # the refit from the regression's start moves the density 4x off; restarted from the scaled start, to the truth
+    starts = _refit_to(monkeypatch, [4.0 * true_density, true_density])
+    sim, params = _start(1.3 * true_density)
+    loss, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
+    assert starts[0] == pytest.approx(0.5) and starts[1] == pytest.approx(2.0, rel=0.1)   # the scaled start
+    assert label.startswith("without refit, rollout scale x") and ", then refit" in label
+    assert float(sim.cloth.material.density[0]) == pytest.approx(true_density)
+    assert params.values()["gravity_offset.delta_g"][0] == pytest.approx(2.0, rel=0.05)
+    assert error == pytest.approx(rollout_error(sim, observed, pinned)) and error < 0.05 * rollout_error(
+        _start(1.3 * true_density)[0], observed, pinned)
+    assert loss == 2.0                                    # the loss of the refit that was kept
+
+
+def test_the_unrefitted_start_is_kept_where_every_refit_spoils_the_rollouts(monkeypatch):
+    observed, pinned = _tilted_fall()
+    true_density = float(_hanging(2.0).cloth.material.density[0])
+    starts = _refit_to(monkeypatch, [4.0 * true_density, 4.0 * true_density])
+    sim, params = _start(true_density)
+    loss, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
+    assert len(starts) == 2 and label.startswith("without refit, rollout scale x4") and "then refit" not in label
+    assert float(sim.cloth.material.density[0]) == pytest.approx(true_density)     # the material left alone
+    assert params.values()["gravity_offset.delta_g"][0] == pytest.approx(2.0, rel=0.05)
+    assert error == pytest.approx(rollout_error(sim, observed, pinned))
+    assert loss == 2.0        # evaluated at the kept parameters (the fake counts its calls: no iteration, no start)
+
+
+def test_a_refit_that_rolls_out_as_well_is_kept_without_a_restart(monkeypatch):
+    observed, pinned = _tilted_fall()
+    true_density = float(_hanging(2.0).cloth.material.density[0])
+    starts = _refit_to(monkeypatch, [true_density])
+    sim, params = _start(3.0 * true_density)
+    _, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
+    assert len(starts) == 1 and label.startswith("regression, rollout scale x4")
+    assert float(sim.cloth.material.density[0]) == pytest.approx(true_density)
+    assert error == pytest.approx(rollout_error(sim, observed, pinned))

@@ -16,6 +16,7 @@ from gg_core.diagnosis.pipeline import (confirmed, implausible, judge_reference,
                                        unresolved, usable_candidates)
 from gg_core.diagnosis.selection import Selection
 from gg_core.physics.cloth import Cloth
+from gg_core.physics.fitting import Observed
 
 
 def _selection() -> Selection:
@@ -208,3 +209,56 @@ def test_a_candidate_is_refitted_in_each_of_its_forms_and_the_training_rollouts_
     mass = pipeline._trial_in_best_form(BY_NAME["mass_damping"], np.array([1.0]), None, ctx, [], [], None, None)
     assert mass.form == ""                                       # no forms: its own model only
     assert pipeline.in_form(wind, "moving air").model is MOVING_AIR.model and pipeline.in_form(wind, "") is wind
+
+
+def test_the_rollout_lag_is_the_recordings_mean_horizontal_offset_from_the_free_rollouts_on_free_vertices():
+    rng = np.random.default_rng(0)
+    pinned = np.array([True, False, False, False])
+    observed = [Observed(name, rng.normal(size=(frames, 4, 3)), None, 30.0) for name, frames in (("a", 6), ("b", 4))]
+    offsets = {"a": np.array([0.004, 0.05, -0.003]), "b": np.array([0.001, -0.02, 0.006])}
+    rollouts = []
+    for obs in observed:
+        traj = obs.garment[1:] - offsets[obs.name]
+        traj[:, pinned] = obs.garment[1:, pinned] + 1.0       # pinned vertices follow their pins, never compared
+        traj[0] += 5.0                                         # the first rolled-out frame is the observed start
+        rollouts.append(traj)
+    lag = pipeline.rollout_lag(rollouts, observed, pinned)
+    # rollout_distance's frames: 4 of sequence a, 2 of b, each with 3 free vertices
+    assert lag == pytest.approx((4 * offsets["a"] + 2 * offsets["b"]) / 6 * np.array([1.0, 0.0, 1.0]))
+    assert lag[1] == 0.0
+
+
+def test_horizontal_candidates_also_start_along_the_rollout_lag():
+    lag = np.array([0.003, 0.0, -0.004])
+    (origin, coefs), = pipeline.lag_start(BY_NAME["gravity_offset"], np.array([2.0, 2.0]), lag)
+    assert origin == "rollout lag" and coefs == pytest.approx([1.2, -1.6])     # (0.6, -0.8) at the probe size
+    (_, wind), = pipeline.lag_start(BY_NAME["wind"], np.array([0.1, 0.3]), lag)
+    assert wind == pytest.approx([0.12, -0.16])                                 # the mean of its probe sizes
+    assert pipeline.lag_start(BY_NAME["mass_damping"], np.array([2.0]), lag) == []   # not a horizontal vector
+    assert pipeline.lag_start(BY_NAME["gravity_offset"], np.array([2.0, 2.0]), np.zeros(3)) == []
+    assert pipeline.lag_start(BY_NAME["wind"], np.array([0.1, 0.0]), lag) == []      # a force that vanishes here
+
+
+def test_the_start_whose_refit_rolls_the_training_sequences_out_best_is_kept(monkeypatch):
+    """pipeline._trial_from_starts: a tilt the regression found along the wrong direction is also started along the
+    rollout lag, and the training rollouts (never the held-out ones) choose; the start is labelled."""
+    tilt, ctx = BY_NAME["gravity_offset"], SimpleNamespace(region=None)
+    monkeypatch.setattr(type(tilt), "probes", lambda self, ctx, acceleration: [(acceleration, None)] * 2)
+    seen = []
+
+    def fake_best_form(cand, coefs, *args):
+        seen.append(coefs.tolist())
+        along_x = coefs[0] > 0.9 * np.hypot(*coefs)
+        return Trial([cand.name], heldout_l2=0.009 if along_x else 0.004, train_loss=1.0,
+                     train_l2=0.005 if along_x else 0.006 if np.any(coefs) else 0.007,
+                     start="without refit, rollout scale x2")
+
+    monkeypatch.setattr(pipeline, "_trial_in_best_form", fake_best_form)
+    lag = np.array([0.004, 0.0, 0.0])
+    best = pipeline._trial_from_starts(tilt, np.array([0.5, 0.5]), None, ctx, [], [], None, None, 1.5, lag)
+    assert seen == [[0.5, 0.5], [1.5, 0.0]]
+    assert best.start == "rollout lag, then without refit, rollout scale x2" and best.heldout_l2 == 0.009
+    seen.clear()
+    best = pipeline._trial_from_starts(tilt, np.array([0.0, 0.0]), None, ctx, [], [], None, None, 1.5, np.zeros(3))
+    assert seen == [[0.0, 0.0], [1.5, 1.5]]                 # nothing regressed: the probe sizes, no lag
+    assert best.start == "probe, then without refit, rollout scale x2"

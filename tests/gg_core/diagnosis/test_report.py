@@ -55,7 +55,8 @@ def test_sentence_and_page(tmp_path):
     v, f = sheet(4, 4, 0.5, 0.5)
     report = {"verdict": "missing", "accepted": ["gravity_offset"], "effects": [EFFECT],
               "heldout_l2_before": 0.012, "heldout_l2_after": 0.006, "outputs": {},
-              "baseline": {"density": 0.2, "viscoelastic_damping.tau": 0.016, "internal_damping_loss_factor": 0.1},
+              "baseline": {"density": 0.2, "viscoelastic_damping.tau": 0.016, "internal_damping_loss_factor": 0.1,
+                           "train_rollout_lag_x_mm": 4.42, "train_rollout_lag_z_mm": -0.5},
               "denoising": {"noise_estimate_mm": {"walk": 1.49}, "smoothed": True, "filter": {"window": 9}},
               "localization": {"vertex_feature": {"name": "height", "spearman": 0.5, "meaning": "height"},
                                "step_feature": {"name": "speed", "spearman": 0.4, "meaning": "speed |v|"}},
@@ -65,6 +66,7 @@ def test_sentence_and_page(tmp_path):
     assert "walk 1.49 mm" in page and "smoothed in time" in page
     assert "Not tried: rest_length_region, not identifiable without an unloaded rest mesh." in page
     assert "viscoelastic_damping.tau 0.016" in page and "loss factor of 0.1 at 1 Hz" in page
+    assert "leave the recordings 4.4 mm along x and -0.5 mm along z on average" in page
     images = re.findall(r'src="data:image/png;base64,([^"]+)"', page)
     assert len(images) == 4
     assert Image.open(io.BytesIO(base64.b64decode(images[0]))).size == (300, 400)

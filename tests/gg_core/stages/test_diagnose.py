@@ -41,6 +41,9 @@ def test_hidden_gravity_tilt_is_named_refitted_and_improves_heldout(tilted, tmp_
     assert effect["name"] == "gravity_offset" and effect["uncertainty"]["inclusion_probability"] >= 0.9
     assert effect["refit"]["gravity_offset.delta_g"][0] == pytest.approx(2.0, rel=0.2)
     assert report["heldout_l2_after"] < 0.5 * report["heldout_l2_before"]
+    # the recordings hang off the baseline's rollouts along the tilt (+x), not across it
+    lag = report["baseline"]["train_rollout_lag_x_mm"], report["baseline"]["train_rollout_lag_z_mm"]
+    assert lag[0] > 3.0 * abs(lag[1]) and lag[0] > 0.5
     assert report["train_sequences"] == ["a", "b"] and report["heldout_sequences"] == ["c"]
     vertex_map = np.load(project / "diagnose" / "residual_vertex.npy")
     template, _ = read_mesh(project / "diagnose" / "template.ply")
