@@ -169,7 +169,7 @@ def refit_or_scale(sim: ImplicitSimulator, params: CandidateParams, first: int, 
         loss = refit(sim, params, train, params.trainable(), config)
         return loss, mean_rollout_error(sim, train, pinned), "regression"
     start = params.snapshot()
-    error, factor = rollout_scale(sim, params, first, train, pinned, np.inf)
+    error, factor = rollout_scale(sim, params, first, train, pinned, mean_rollout_error(sim, train, pinned))
     unrefitted = (error, params.snapshot(), None, f"without refit{scale_label(factor)}")
     options = [unrefitted]
     for values, origin in ((start, "regression"), (unrefitted[1], f"without refit{scale_label(factor)}, then refit")):

@@ -175,3 +175,14 @@ def test_a_refit_that_rolls_out_as_well_is_kept_without_a_restart(monkeypatch):
     assert len(starts) == 1 and label.startswith("regression, rollout scale x4")
     assert float(sim.cloth.material.density[0]) == pytest.approx(true_density)
     assert error == pytest.approx(rollout_error(sim, observed, pinned))
+
+
+def test_a_coefficient_no_factor_changes_is_not_labelled_as_scaled(monkeypatch):
+    observed, pinned = _tilted_fall()
+    true_density = float(_hanging(2.0).cloth.material.density[0])
+    _refit_to(monkeypatch, [4.0 * true_density, 4.0 * true_density])
+    sim = _hanging(0.0)                      # the regression put nothing on the tilt: every factor rolls out alike
+    params = CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {})
+    _, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
+    assert label == "without refit" and params.values()["gravity_offset.delta_g"] == [0.0, 0.0, 0.0]
+    assert error == pytest.approx(rollout_error(sim, observed, pinned))
