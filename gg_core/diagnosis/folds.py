@@ -147,12 +147,13 @@ class CrossValidation:
 
         Why not every fold: where both make the held-out recording worse, it does not show the effect to either
         (the walk-less fold, session 30), and which one harms it less says nothing about which is missing.
-        Measured (session 33, Blender's hidden wind, seed 2, 20 steps, with the trial starts of branch
-        wip/registered-trial-starts; held-out / training gains per fold): wind +29 / +23 % against the tilt's
-        +24 / +20 % without the arm swing, +18 / +14 against +14 / +13 % without the twist, and -7.3 / +36 against
-        -4.3 / +27 % without the walk; counting the walk fold, the two were not separated and the residual (the
-        tilt selected, inclusion 0.82) named the tilt, a wrong class. (This code's trials did not confirm the tilt
-        there: -2.2 % without the twist.)"""
+        Measured (session 33, Blender's hidden wind, seed 2, 20 steps, with session 32's trial starts, then on a
+        branch; on main since session 34 with a refit restarted from the unrefitted start, confirm.refit_or_scale;
+        held-out / training gains per fold): wind +29 / +23 % against the tilt's +24 / +20 % without the arm swing,
+        +18 / +14 against +14 / +13 % without the twist, and -7.3 / +36 against -4.3 / +27 % without the walk;
+        counting the walk fold, the two were not separated and the residual (the tilt selected, inclusion 0.82)
+        named the tilt, a wrong class. (The trials before those starts did not confirm the tilt there: -2.2 %
+        without the twist.)"""
         both = [f for f in self.folds if first in f.trials and other in f.trials
                 and max(f.gains(first)[0], f.gains(other)[0]) > 0]
         return len(both) >= 2 and all(min(f.gains(first)[:2]) > min(f.gains(other)[:2]) for f in both)

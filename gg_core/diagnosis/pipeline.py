@@ -48,11 +48,12 @@ BASELINE_FIT = ("collision.margin", "viscoelastic_damping.tau")
 # named_first: the share of bootstrap replicates in which a rival the folds do not separate from the rollouts' first
 # must explain more of the residual alone than it, where the selection chose neither (a one-sided paired test).
 # Measured (session 33, tilt against wind, 1000 replicates; the diagnosis draws 100): the demo capture's registered
-# meshes with a hidden tilt, nothing selected, 0.97 for the tilt (0.96 with the diagnosis's 100; with the trial
-# starts of branch wip/registered-trial-starts the rollouts led with wind by half a point, this code's trials confirm
-# neither). Where the selection chose one: for the tilt Blender's s1 / s2 0.79 / 1.0, our
-# simulator's s2 at 1.5 mm 0.947, the demo capture's ground truth 0.997; Blender wind s1 0.90 for wind, but Blender
-# wind s2 0.87 for the tilt, a wrong pattern: short of 0.95 the residual's preference is no evidence.
+# meshes with a hidden tilt, nothing selected, 0.97 for the tilt (0.96 with the diagnosis's 100; with session 32's
+# trial starts, on main since session 34 (confirm.refit_or_scale, lag_start), the rollouts led with wind by half
+# a point, the trials before them confirmed neither). Where the selection chose one: for the tilt Blender's s1 / s2
+# 0.79 / 1.0, our simulator's s2 at 1.5 mm 0.947, the demo capture's ground truth 0.997; Blender wind s1 0.90 for
+# wind, but Blender wind s2 0.87 for the tilt, a wrong pattern: short of 0.95 the residual's preference is no
+# evidence.
 RESIDUAL_PREFERENCE = 0.95
 MARGIN_STARTS = (1.0, 3.0)     # baseline fits start from the collision term's default margin times these
 INITIAL_LOSS_FACTOR = 0.1      # internal damping starts at a typical fabric's loss factor at 1 Hz
