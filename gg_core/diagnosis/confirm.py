@@ -165,9 +165,12 @@ def refit_or_scale(sim: ImplicitSimulator, params: CandidateParams, first: int, 
     held-out, where the baseline with the tilt added and nothing refitted gains 14-17 %. Why (c): (a) alone keeps
     the baseline's material, which the effect's absence biased; on Blender's hidden tilt (seed 1) choosing (a)
     where it won left the tilt 26 % off, against 14 % with the refit (session 33)."""
-    if first >= len(params.term_s):
+    if first >= len(params.term_s) or not any(np.any(np.asarray(term.params[key].detach()) != 0)
+                                               for term, key, _ in params.term_refs[first:]):
+        # nothing to scale: no term coefficients, or all zero (then the unrefitted start is the baseline itself)
         loss = refit(sim, params, train, params.trainable(), config)
-        return loss, mean_rollout_error(sim, train, pinned), "regression"
+        error, factor = rollout_scale(sim, params, first, train, pinned, mean_rollout_error(sim, train, pinned))
+        return loss, error, f"regression{scale_label(factor)}"
     start = params.snapshot()
     error, factor = rollout_scale(sim, params, first, train, pinned, mean_rollout_error(sim, train, pinned))
     unrefitted = (error, params.snapshot(), None, f"without refit{scale_label(factor)}")

@@ -177,12 +177,14 @@ def test_a_refit_that_rolls_out_as_well_is_kept_without_a_restart(monkeypatch):
     assert error == pytest.approx(rollout_error(sim, observed, pinned))
 
 
-def test_a_coefficient_no_factor_changes_is_not_labelled_as_scaled(monkeypatch):
+def test_a_zero_coefficient_is_only_refitted(monkeypatch):
+    """Without a coefficient the unrefitted start is the baseline itself: nothing to scale, no restart."""
     observed, pinned = _tilted_fall()
     true_density = float(_hanging(2.0).cloth.material.density[0])
-    _refit_to(monkeypatch, [4.0 * true_density, 4.0 * true_density])
-    sim = _hanging(0.0)                      # the regression put nothing on the tilt: every factor rolls out alike
+    starts = _refit_to(monkeypatch, [4.0 * true_density])
+    sim = _hanging(0.0)
     params = CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {})
-    _, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
-    assert label == "without refit" and params.values()["gravity_offset.delta_g"] == [0.0, 0.0, 0.0]
+    loss, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
+    assert starts == [0.0] and label == "regression" and loss == 1.0
+    assert float(sim.cloth.material.density[0]) == pytest.approx(4.0 * true_density)
     assert error == pytest.approx(rollout_error(sim, observed, pinned))

@@ -229,14 +229,22 @@ def test_the_rollout_lag_is_the_recordings_mean_horizontal_offset_from_the_free_
 
 
 def test_horizontal_candidates_also_start_along_the_rollout_lag():
-    lag = np.array([0.003, 0.0, -0.004])
-    (origin, coefs), = pipeline.lag_start(BY_NAME["gravity_offset"], np.array([2.0, 2.0]), lag)
+    lag, tilt, wind = np.array([0.003, 0.0, -0.004]), BY_NAME["gravity_offset"], BY_NAME["wind"]
+    across = np.array([0.8, 0.6])                                     # the regression's direction, 90 degrees off
+    (origin, coefs), = pipeline.lag_start(tilt, np.array([2.0, 2.0]), lag, across)
     assert origin == "rollout lag" and coefs == pytest.approx([1.2, -1.6])     # (0.6, -0.8) at the probe size
-    (_, wind), = pipeline.lag_start(BY_NAME["wind"], np.array([0.1, 0.3]), lag)
-    assert wind == pytest.approx([0.12, -0.16])                                 # the mean of its probe sizes
-    assert pipeline.lag_start(BY_NAME["mass_damping"], np.array([2.0]), lag) == []   # not a horizontal vector
-    assert pipeline.lag_start(BY_NAME["gravity_offset"], np.array([2.0, 2.0]), np.zeros(3)) == []
-    assert pipeline.lag_start(BY_NAME["wind"], np.array([0.1, 0.0]), lag) == []      # a force that vanishes here
+    (_, pressure), = pipeline.lag_start(wind, np.array([0.1, 0.3]), lag, np.zeros(2))
+    assert pressure == pytest.approx([0.12, -0.16])                             # the mean of its probe sizes
+    assert pipeline.lag_start(BY_NAME["mass_damping"], np.array([2.0]), lag, np.ones(1)) == []   # not horizontal
+    assert pipeline.lag_start(tilt, np.array([2.0, 2.0]), np.zeros(3), across) == []
+    assert pipeline.lag_start(wind, np.array([0.1, 0.0]), lag, across) == []   # a force that vanishes here
+    # a start already along the lag (within LAG_REDUNDANT_DEG) would repeat its trial; 12 degrees off would not
+    turn = np.radians(8.0)
+    near = 0.3 * np.array([0.6 * np.cos(turn) + 0.8 * np.sin(turn), -0.8 * np.cos(turn) + 0.6 * np.sin(turn)])
+    assert pipeline.LAG_REDUNDANT_DEG == 10.0 and pipeline.lag_start(tilt, np.array([2.0, 2.0]), lag, near) == []
+    turn = np.radians(12.0)
+    off = np.array([0.6 * np.cos(turn) + 0.8 * np.sin(turn), -0.8 * np.cos(turn) + 0.6 * np.sin(turn)])
+    assert len(pipeline.lag_start(tilt, np.array([2.0, 2.0]), lag, off)) == 1
 
 
 def test_the_start_whose_refit_rolls_the_training_sequences_out_best_is_kept(monkeypatch):
