@@ -126,9 +126,11 @@ def refit(sim: ImplicitSimulator, params: BehaviorParams, train: list[Observed],
 
 def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple[Candidate, np.ndarray]],
           ctx: Context, region: np.ndarray | None, train: list[Observed], heldout: list[Observed],
-          pinned: np.ndarray, config: FitConfig) -> Trial:
+          pinned: np.ndarray, config: FitConfig, unrefitted: bool = False) -> Trial:
     """Refit the baseline with the chosen candidates (initial coefficients given) and roll out the held-out
-    sequences. `base_fit` are the term parameters the baseline fitted; the baseline simulator is left unchanged."""
+    sequences. `base_fit` are the term parameters the baseline fitted; the baseline simulator is left unchanged.
+    `unrefitted`: a single candidate is also tried on the unrefitted baseline (refit_or_scale), for measured
+    recordings (pipeline.measured_lag)."""
     start = time.perf_counter()
     change = merge([cand.model(coefs, ctx) for cand, coefs in chosen])
     cloth = copy.deepcopy(base.cloth)
@@ -138,13 +140,16 @@ def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple
     params = CandidateParams(cloth, sim, base_fit + change.fit, region, change.region)
     params.apply(cloth)
     sim.refresh()
-    if len(chosen) == 1 and not chosen[0][0].rollout_values:
+    if unrefitted and len(chosen) == 1 and not chosen[0][0].rollout_values:
         loss, train_error, start_label = refit_or_scale(sim, params, len(base_fit), train, pinned, config)
     else:
         loss = refit(sim, params, train, params.trainable(), config)
         train_error, start_label = mean_rollout_error(sim, train, pinned), "regression"
-        if len(chosen) == 1:
+        if len(chosen) == 1 and chosen[0][0].rollout_values:
             train_error, start_label = rollout_choice(sim, chosen[0][0], ctx, train, pinned, train_error)
+        elif len(chosen) == 1:
+            train_error, factor = rollout_scale(sim, params, len(base_fit), train, pinned, train_error)
+            start_label = f"regression{scale_label(factor)}"
     error = mean_rollout_error(sim, heldout, pinned)
     return Trial([c.name for c, _ in chosen], error, loss, train_error, params.values(), time.perf_counter() - start,
                  start_label)

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -242,7 +242,7 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     inputs = prepare(req, capture, train_names, heldout_names, source)
     train, heldout, faces = inputs.train, inputs.heldout, inputs.faces
     reference_region = np.load(req.reference_region) if req.reference_region else None
-    result = diagnose(req, train, heldout, faces, inputs.body_faces, inputs.attached,
+    result = diagnose(replace(req, source=source), train, heldout, faces, inputs.body_faces, inputs.attached,
                       hand_mask(train[0].body.shape[1]), reference_region, inputs.rest,
                       Progress(STAGE, 10 + req.max_trials + len(req.reference)
                                + len(train) * (1 + req.fold_finalists + len(req.reference)),

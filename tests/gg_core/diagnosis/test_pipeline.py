@@ -270,3 +270,10 @@ def test_the_start_whose_refit_rolls_the_training_sequences_out_best_is_kept(mon
     best = pipeline._trial_from_starts(tilt, np.array([0.0, 0.0]), None, ctx, [], [], None, None, 1.5, np.zeros(3))
     assert seen == [[0.0, 0.0], [1.5, 1.5]]                 # nothing regressed: the probe sizes, no lag
     assert best.start == "probe, then without refit, rollout scale x2"
+
+
+def test_the_lag_and_unrefitted_starts_are_for_registered_meshes_only():
+    measured = SimpleNamespace(lag=np.array([0.004, 0.0, 0.0]))
+    assert pipeline.measured_lag("registered", measured) is measured.lag
+    assert pipeline.measured_lag("gt", measured) is None
+    assert pipeline.lag_start(BY_NAME["gravity_offset"], np.array([2.0, 2.0]), None, np.zeros(2)) == []
