@@ -140,28 +140,27 @@ def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple
     params = CandidateParams(cloth, sim, base_fit + change.fit, region, change.region)
     params.apply(cloth)
     sim.refresh()
-    if unrefitted and len(chosen) == 1 and not chosen[0][0].rollout_values:
-        loss, train_error, start_label = refit_or_scale(sim, params, len(base_fit), train, pinned, config)
+    if len(chosen) == 1 and not chosen[0][0].rollout_values:
+        loss, train_error, start_label = refit_or_scale(sim, params, len(base_fit), train, pinned, config,
+                                                        unrefitted)
     else:
         loss = refit(sim, params, train, params.trainable(), config)
         train_error, start_label = mean_rollout_error(sim, train, pinned), "regression"
-        if len(chosen) == 1 and chosen[0][0].rollout_values:
+        if len(chosen) == 1:
             train_error, start_label = rollout_choice(sim, chosen[0][0], ctx, train, pinned, train_error)
-        elif len(chosen) == 1:
-            train_error, factor = rollout_scale(sim, params, len(base_fit), train, pinned, train_error)
-            start_label = f"regression{scale_label(factor)}"
     error = mean_rollout_error(sim, heldout, pinned)
     return Trial([c.name for c, _ in chosen], error, loss, train_error, params.values(), time.perf_counter() - start,
                  start_label)
 
 
 def refit_or_scale(sim: ImplicitSimulator, params: CandidateParams, first: int, train: list[Observed],
-                   pinned: np.ndarray, config: FitConfig) -> tuple[float, float, str]:
+                   pinned: np.ndarray, config: FitConfig, unrefitted: bool = True) -> tuple[float, float, str]:
     """A single candidate's coefficients (params.term_s from index `first` on), chosen on the training rollouts
     among: (a) the candidate added to the UNREFITTED baseline at its start, scaled by rollout_scale; (b) its refit
     with the material from that start, scaled the same way; (c) where (a) rolls out better than (b), the refit
     started from (a), scaled again. Leaves the best applied; returns its teacher-forced loss, its training rollout
-    error and where its value came from. Candidates without term coefficients (region fields) are refitted only.
+    error and where its value came from. Only (b) without `unrefitted`, or without term coefficients to scale
+    (region fields; all zero, where (a) is the baseline itself).
 
     Why (a): the refit predicts observed states a few frames ahead, and where the one-frame residual is mostly
     measurement error it can move the material so that free rollouts get worse than with no refit at all.
@@ -170,9 +169,8 @@ def refit_or_scale(sim: ImplicitSimulator, params: CandidateParams, first: int, 
     held-out, where the baseline with the tilt added and nothing refitted gains 14-17 %. Why (c): (a) alone keeps
     the baseline's material, which the effect's absence biased; on Blender's hidden tilt (seed 1) choosing (a)
     where it won left the tilt 26 % off, against 14 % with the refit (session 33)."""
-    if first >= len(params.term_s) or not any(np.any(np.asarray(term.params[key].detach()) != 0)
-                                               for term, key, _ in params.term_refs[first:]):
-        # nothing to scale: no term coefficients, or all zero (then the unrefitted start is the baseline itself)
+    if not unrefitted or first >= len(params.term_s) or not any(
+            np.any(np.asarray(term.params[key].detach()) != 0) for term, key, _ in params.term_refs[first:]):
         loss = refit(sim, params, train, params.trainable(), config)
         error, factor = rollout_scale(sim, params, first, train, pinned, mean_rollout_error(sim, train, pinned))
         return loss, error, f"regression{scale_label(factor)}"
