@@ -525,8 +525,10 @@ def _trial_from_starts(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulato
     regression's direction was (0.77, 0.38), 26 degrees off, and its trial gained 2.4 % held-out; the recordings'
     mean offset from the baseline's training rollouts lay along (0.99, -0.11), and the baseline with a tilt of
     2 m/s^2 along it, nothing refitted, rolled the held-out sequence out 17 % better."""
-    sizes = np.array([size for size, _ in cand.probes(ctx, acceleration)])
     starts = [("regression", coefs)]
+    if np.any(coefs != 0) and (lag is None or not cand.horizontal):   # no other start: no probe forces needed
+        return _best_of_starts(cand, starts, sim, ctx, train, heldout, attached, config, lag is not None)
+    sizes = np.array([size for size, _ in cand.probes(ctx, acceleration)])
     if not np.any(coefs != 0) and np.all(sizes > 0):
         starts.append(("probe", sizes))
     return _best_of_starts(cand, starts + lag_start(cand, sizes, lag, starts[-1][1]), sim, ctx, train, heldout,

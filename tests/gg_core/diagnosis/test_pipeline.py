@@ -277,3 +277,18 @@ def test_the_lag_and_unrefitted_starts_are_for_registered_meshes_only():
     assert pipeline.measured_lag("registered", measured) is measured.lag
     assert pipeline.measured_lag("gt", measured) is None
     assert pipeline.lag_start(BY_NAME["gravity_offset"], np.array([2.0, 2.0]), None, np.zeros(2)) == []
+
+
+def test_a_regressed_start_with_no_other_start_needs_no_probe_forces(monkeypatch):
+    def no_probes(self, ctx, acceleration):
+        raise AssertionError("probe forces computed for nothing")
+
+    monkeypatch.setattr(type(BY_NAME["mass_damping"]), "probes", no_probes)
+    monkeypatch.setattr(pipeline, "_trial_in_best_form",
+                        lambda cand, coefs, *args: Trial([cand.name], 0.004, 1.0, 0.005, start="regression"))
+    ctx, lag = SimpleNamespace(region=None), np.array([0.004, 0.0, 0.0])
+    damping = pipeline._trial_from_starts(BY_NAME["mass_damping"], np.array([2.0]), None, ctx, [], [], None, None,
+                                          0.5, lag)
+    tilt = pipeline._trial_from_starts(BY_NAME["gravity_offset"], np.array([0.5, 0.0]), None, ctx, [], [], None,
+                                       None, 0.5, None)          # ground truth: no lag start either
+    assert damping.start == tilt.start == "regression"
