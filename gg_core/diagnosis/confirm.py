@@ -49,9 +49,9 @@ class CandidateParams(BehaviorParams):
     """Global behaviour latents plus region log-scales of material fields (library.apply_region)."""
 
     def __init__(self, cloth: Cloth, sim: ImplicitSimulator, term_params: tuple[str, ...],
-                 region: np.ndarray | None, region_init: dict[str, float]) -> None:
+                 region: np.ndarray | None, region_init: dict[str, float], held: tuple[str, ...] = ()) -> None:
         super().__init__(cloth, {n: float(getattr(cloth.material, n).mean()) for n in MATERIAL_NAMES}, sim.terms,
-                         term_params)
+                         term_params, held)
         self.region = region
         self.region_keys = tuple(region_init)
         self.region_s = torch.tensor([region_init[k] for k in self.region_keys], dtype=torch.float64)
@@ -137,7 +137,7 @@ def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple
     sim = ImplicitSimulator(cloth, terms=with_terms(copy.deepcopy(base.terms), change.terms), collider=base.collider,
                             fps=base.fps, substeps=base.substeps, options=base.options,
                             contact_reach=base.contact_reach)
-    params = CandidateParams(cloth, sim, base_fit + change.fit, region, change.region)
+    params = CandidateParams(cloth, sim, base_fit + change.fit, region, change.region, config.held)
     params.apply(cloth)
     sim.refresh()
     if len(chosen) == 1 and not chosen[0][0].rollout_values:

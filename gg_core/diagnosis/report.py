@@ -249,6 +249,10 @@ def _baseline_paragraph(baseline: dict) -> str:
                                                             "viscoelastic_damping.tau") if k in baseline)
     eta = baseline.get("internal_damping_loss_factor")
     damping = "" if eta is None else f" The fitted internal damping has a loss factor of {eta:.2g} at 1 Hz."
+    held = baseline.get("held_material") or []
+    if held:
+        damping += (f" Held at the default, not fitted: {', '.join(held)} (the motion fixes it only as a scale of "
+                    f"the material).")
     lag = ""
     if "train_rollout_lag_x_mm" in baseline:
         lag = (f" Its free rollouts of the training sequences leave the recordings "

@@ -176,17 +176,17 @@ def make_pooling(sim: ImplicitSimulator, batch: FrameBatch, patch_vertices: int 
 
 def nuisance_changes(sim: ImplicitSimulator, params: BehaviorParams, h: float = 0.02
                      ) -> tuple[list[str], list[tuple[float, Callable[[], ContextManager]]]]:
-    """One change per fitted global latent (material values, term log-scales), each a step of `h`, and a relative
-    change `h` of the vertical gravity. Regressing on their responses with free coefficients judges a candidate
+    """One change per fitted global latent (material values not held, term log-scales), each a step of `h`, and a
+    relative change `h` of the vertical gravity. Regressing on their responses with free coefficients judges a candidate
     against a re-adjusted baseline, since the global fit has already absorbed what the material can mimic.
 
     Gravity's magnitude is a nuisance because the rest shape is an observed frame: hanging under gravity, it is
     stretched, but the model takes it as stress-free, so every capture shows a missing upward force of the order
     of g (measured: an upward gravity offset of 6-10 m/s^2 explained 40-60 % of the residual on Blender skirts
     with and without hidden effects). Only the tilt of gravity stays identifiable (library.py)."""
-    latents = [(params.global_z, k) for k in range(len(params.global_z))] + \
-              [(params.term_s, k) for k in range(len(params.term_s))]
-    labels = [f"material.{n}" for n in params.global_values()] + [f"{t.name}.{k}" for t, k, _ in params.term_refs]
+    free = [(k, n) for k, n in enumerate(params.global_values()) if n not in params.held]
+    latents = [(params.global_z, k) for k, _ in free] + [(params.term_s, k) for k in range(len(params.term_s))]
+    labels = [f"material.{n}" for _, n in free] + [f"{t.name}.{k}" for t, k, _ in params.term_refs]
 
     def shift(tensor: torch.Tensor, k: int) -> Callable[[], ContextManager]:
         @contextmanager

@@ -56,12 +56,18 @@ class BehaviorParams:
     """Latents of a cloth's behaviour and their mapping onto a Cloth and its terms (differentiable).
 
     `term_params` names positive scalar parameters of the simulator's terms ("collision.margin") that are fitted
-    with the global material as log-scale factors of their current values.
+    with the global material as log-scale factors of their current values; `held` names global material values
+    the fits leave at `initial` (minimize_lbfgs masks their gradients).
     """
 
     def __init__(self, cloth: Cloth, initial: dict[str, float] | None = None, terms: list[Term] = (),
-                 term_params: tuple[str, ...] = ()) -> None:
+                 term_params: tuple[str, ...] = (), held: tuple[str, ...] = ()) -> None:
         initial = initial or {}
+        unknown = set(held) - set(MATERIAL_NAMES)
+        if unknown:
+            raise ValueError(f"cannot hold {sorted(unknown)}: the global material values are {MATERIAL_NAMES}")
+        self.held = tuple(held)
+        self.free_global = torch.tensor([0.0 if n in held else 1.0 for n in MATERIAL_NAMES], dtype=torch.float64)
         self.base_rest = cloth.rest_lengths.detach().clone()
         self.global_z = torch.stack([to_latent(n, initial.get(n, MATERIAL_SPEC[n][0])) for n in MATERIAL_NAMES])
         self.vertex_z = torch.zeros(len(MATERIAL_NAMES), cloth.n_vertices, dtype=torch.float64)
@@ -354,6 +360,7 @@ class FitConfig:
     # term parameters fitted with the global material: the garment-body contact thickness was measured to matter
     # as much as the material on Blender captures (its collision keeps cloth ~1 cm off the body)
     term_params: tuple[str, ...] = ("collision.margin",)
+    held: tuple[str, ...] = ()      # global material values left as they are (BehaviorParams)
 
 
 def minimize_lbfgs(sim: ImplicitSimulator, params: BehaviorParams, trainable: list[torch.Tensor],
@@ -363,6 +370,7 @@ def minimize_lbfgs(sim: ImplicitSimulator, params: BehaviorParams, trainable: li
     The loss is divided by its first value: L-BFGS's first step has no curvature history and assumes an O(1)
     problem, which squared distances in metres are far from. Its last iterate need not be the best point it
     evaluated, so the best state seen is kept: it is left applied to the cloth of `sim`, and its loss is returned.
+    Held material values (params.held) get no gradient, so no L-BFGS direction moves them.
     """
     best: list = [np.inf, params.state()]
     scale: list[float] = []
@@ -373,7 +381,7 @@ def minimize_lbfgs(sim: ImplicitSimulator, params: BehaviorParams, trainable: li
             best[:] = [loss, params.state()]
         scale.append(scale[0] if scale else 1.0 / max(loss, 1e-30))
         for t, g in zip(trainable, grads):
-            t.grad = g * scale[0]
+            t.grad = g * scale[0] * (params.free_global if t is params.global_z else 1.0)
         return torch.tensor(loss * scale[0], dtype=torch.float64)
 
     torch.optim.LBFGS(trainable, lr=1.0, max_iter=iterations, max_eval=int(iterations * 1.5), history_size=10,
@@ -391,7 +399,7 @@ def fit_behavior(sim: ImplicitSimulator, train: list[Observed], config: FitConfi
     L-BFGS on the one-frame loss (the global problem is small but badly scaled: bending barely moves one frame,
     which first-order methods crawl along). The cloth of `sim` is left with the best parameters seen."""
     params = BehaviorParams(sim.cloth, {n: float(getattr(sim.cloth.material, n).mean()) for n in MATERIAL_NAMES},
-                            sim.terms, config.term_params)
+                            sim.terms, config.term_params, config.held)
     problem = TeacherForced(sim, train, config.max_samples, config.seed, horizon=config.horizon)
     log = FitLog()
     stages = [("global", [params.global_z, params.term_s], config.global_iterations, None),

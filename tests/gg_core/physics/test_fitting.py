@@ -82,6 +82,26 @@ def test_fitting_recovers_known_material():
     assert rollout_error(sim, held_out, pinned) < 0.2 * before
 
 
+def test_held_density_stays_and_the_ratios_still_come_back():
+    """Density is nearly a free scale of the material (weight and inertia both carry it), so holding it at the
+    default (the diagnosis on registered meshes) must leave it exactly there and still find the stiffness /
+    density ratios; an unknown name is refused."""
+    sim_factory, sequence, pinned = _problem()
+    train, held_out = [sequence("a", 0.1), sequence("b", -0.15)], sequence("c", 0.12)
+    sim = sim_factory({})
+    before = rollout_error(sim, held_out, pinned)
+    params, _ = fit_behavior(sim, train, FitConfig(global_iterations=20, local_iterations=0, max_samples=24,
+                                                   held=("density",)))
+    fitted = params.global_values()
+    assert fitted["density"] == pytest.approx(MATERIAL_SPEC["density"][0], rel=1e-9)
+    assert float(sim.cloth.material.density.mean()) == pytest.approx(MATERIAL_SPEC["density"][0], rel=1e-9)
+    for n in ("mu", "lam", "bending"):
+        assert fitted[n] / fitted["density"] == pytest.approx(TRUTH[n] / TRUTH["density"], rel=0.05)
+    assert rollout_error(sim, held_out, pinned) < 0.2 * before
+    with pytest.raises(ValueError, match="cannot hold"):
+        BehaviorParams(sim.cloth, held=("thickness",))
+
+
 def test_fitting_recovers_a_force_term_parameter():
     """A switched-on force-library term's parameter is fitted with the global material (the diagnosis adds terms
     this way): air drag generated with coef 1.5 is found from 0.3."""
