@@ -56,7 +56,8 @@ def test_sentence_and_page(tmp_path):
     report = {"verdict": "missing", "accepted": ["gravity_offset"], "effects": [EFFECT],
               "heldout_l2_before": 0.012, "heldout_l2_after": 0.006, "outputs": {},
               "baseline": {"density": 0.2, "viscoelastic_damping.tau": 0.016, "internal_damping_loss_factor": 0.1,
-                           "train_rollout_lag_x_mm": 4.42, "train_rollout_lag_z_mm": -0.5},
+                           "train_rollout_lag_x_mm": 4.42, "train_rollout_lag_z_mm": -0.5,
+                           "held_material": ["density"]},
               "denoising": {"noise_estimate_mm": {"walk": 1.49}, "smoothed": True, "filter": {"window": 9}},
               "localization": {"vertex_feature": {"name": "height", "spearman": 0.5, "meaning": "height"},
                                "step_feature": {"name": "speed", "spearman": 0.4, "meaning": "speed |v|"}},
@@ -66,6 +67,7 @@ def test_sentence_and_page(tmp_path):
     assert "walk 1.49 mm" in page and "smoothed in time" in page
     assert "Not tried: rest_length_region, not identifiable without an unloaded rest mesh." in page
     assert "viscoelastic_damping.tau 0.016" in page and "loss factor of 0.1 at 1 Hz" in page
+    assert "Held at the default, not fitted: density" in page
     assert "leave the recordings 4.4 mm along x and -0.5 mm along z on average" in page
     images = re.findall(r'src="data:image/png;base64,([^"]+)"', page)
     assert len(images) == 4
