@@ -213,12 +213,11 @@ def held_material(source: str) -> tuple[str, ...]:
 
     Why: weight and inertia both scale with the density, so a motion fixes it only through the few forces that do
     not (contact, wind): it is nearly a free scale of the material, and a flat direction for L-BFGS. On the demo
-    capture's registered meshes with a hidden gravity tilt (session 36, /work/data/s36/densprobe.py) the free
-    fit ended at 0.0087 kg/m^2 (its bound is 0.0043), a worse minimum than the default's 0.2 held: training
-    rollouts 12.26 vs 12.11 mm, held-out 9.53 vs 9.67 mm. From the free fit the tilt along the rollout lag, added
-    with nothing refitted, gained 7.6 % held-out and pointed 51 degrees off the truth; from the held one it gained
-    20.5 % and pointed 32 degrees off. Ground truth keeps the free density its benchmark figures were measured
-    with (sessions 26-35)."""
+    capture's registered meshes with a hidden gravity tilt (session 36) the free fit ended at 0.0087 kg/m^2 (its
+    bound is 0.0043), a worse minimum than the default's 0.2 held: training rollouts 12.26 vs 12.11 mm, held-out
+    9.53 vs 9.67 mm. From the free fit the tilt along the rollout lag, added with nothing refitted, gained 7.6 %
+    held-out and pointed 51 degrees off the truth; from the held one it gained 20.5 % and pointed 32 degrees off.
+    Ground truth keeps the free density its benchmark figures were measured with (sessions 26-35)."""
     return ("density",) if source == "registered" else ()
 
 
