@@ -91,20 +91,26 @@ def test_registered_meshes_are_read_from_the_project(tilted, tmp_path):
 
 
 @pytest.fixture(scope="module")
-def blender_captures(tmp_path_factory) -> dict[str, Path]:
-    """Small ground-truth-only Blender captures (3 sequences x 16 frames, ~400-vertex skirt, seed 0): one with
-    tilted, stronger gravity, one with the reference physics. At Blender's own default steps per frame, not the
-    benchmark's 20: a tilt is resolved there, and the captures take a quarter of the time."""
+def blender_capture(tmp_path_factory):
+    """Small ground-truth-only Blender captures (3 sequences x 16 frames, ~400-vertex skirt, seed 0), made on first
+    use: `"gravity"` with tilted, stronger gravity, `"none"` with the reference physics. Each test makes only the
+    one it reads, so where xdist runs the two tests on different workers neither makes both. At Blender's own
+    default steps per frame, not the benchmark's 20: a tilt is resolved there, and the captures take a quarter of
+    the time."""
     from gg_core.commands.bench_diagnose import BLENDER_DEFAULT_STEPS, effect_params, preset
     from gg_core.synth.generate import SynthRequest, generate
 
     root = tmp_path_factory.mktemp("blender_diag")
-    out = {}
-    for effect in ("gravity", "none"):
-        out[effect] = root / effect
-        generate(SynthRequest(preset=preset(16, 400, BLENDER_DEFAULT_STEPS), out=out[effect], effect=effect,
-                              effect_params=effect_params(effect, 1.0), render=False, progress="none"))
-    return out
+    made: dict[str, Path] = {}
+
+    def make(effect: str) -> Path:
+        if effect not in made:
+            generate(SynthRequest(preset=preset(16, 400, BLENDER_DEFAULT_STEPS), out=root / effect, effect=effect,
+                                  effect_params=effect_params(effect, 1.0), render=False, progress="none"))
+            made[effect] = root / effect
+        return made[effect]
+
+    return make
 
 
 BLENDER = {"baseline_iterations": 10, "refit_iterations": 6, "bootstrap": 40, "progress": "none"}
@@ -116,8 +122,8 @@ BLENDER_TILT = {**BLENDER, "max_trials": 4, "fold_finalists": 2}
 
 @pytest.mark.bpy
 @pytest.mark.slow
-def test_blender_gravity_tilt_is_named(blender_captures, tmp_path):
-    report = json.loads(run_diagnose(DiagnoseRequest(capture=blender_captures["gravity"], project=tmp_path,
+def test_blender_gravity_tilt_is_named(blender_capture, tmp_path):
+    report = json.loads(run_diagnose(DiagnoseRequest(capture=blender_capture("gravity"), project=tmp_path,
                                                      **BLENDER_TILT)).read_text())
     assert report["accepted_classes"][:1] == ["gravity"]
     folds = report["cross_validation"]["candidates"]
@@ -130,8 +136,8 @@ def test_blender_gravity_tilt_is_named(blender_captures, tmp_path):
 
 @pytest.mark.bpy
 @pytest.mark.slow
-def test_blender_reference_physics_gives_verdict_none(blender_captures, tmp_path):
-    report = json.loads(run_diagnose(DiagnoseRequest(capture=blender_captures["none"], project=tmp_path,
+def test_blender_reference_physics_gives_verdict_none(blender_capture, tmp_path):
+    report = json.loads(run_diagnose(DiagnoseRequest(capture=blender_capture("none"), project=tmp_path,
                                                      **BLENDER)).read_text())
     assert report["verdict"] == "none"
 
