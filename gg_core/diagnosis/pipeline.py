@@ -549,22 +549,21 @@ def _trial_from_starts(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulato
     2 m/s^2 along it, nothing refitted, rolled the held-out sequence out 17 % better."""
     starts = [("regression", coefs)]
     if np.any(coefs != 0) and (lag is None or not cand.horizontal):   # no other start: no probe forces needed
-        return _best_of_starts(cand, starts, sim, ctx, train, heldout, attached, config, lag is not None)
+        return _best_of_starts(cand, starts, sim, ctx, train, heldout, attached, config)
     sizes = np.array([size for size, _ in cand.probes(ctx, acceleration)])
     if not np.any(coefs != 0) and np.all(sizes > 0):
         starts.append(("probe", sizes))
     return _best_of_starts(cand, starts + lag_start(cand, sizes, lag, starts[-1][1]), sim, ctx, train, heldout,
-                           attached, config, lag is not None)
+                           attached, config)
 
 
 def _best_of_starts(cand: Candidate, starts: list[tuple[str, np.ndarray]], sim: ImplicitSimulator, ctx: Context,
-                    train: list[Observed], heldout: list[Observed], attached: np.ndarray, config: FitConfig,
-                    unrefitted: bool) -> Trial:
+                    train: list[Observed], heldout: list[Observed], attached: np.ndarray, config: FitConfig) -> Trial:
     """_trial_in_best_form from each (origin, coefficients) start, the one that rolls the training sequences out
     best (the first on ties), its start labelled with the origin unless that is "regression"."""
     best = None
     for origin, coefs in starts:
-        t = _trial_in_best_form(cand, coefs, sim, ctx, train, heldout, attached, config, unrefitted)
+        t = _trial_in_best_form(cand, coefs, sim, ctx, train, heldout, attached, config)
         if origin != "regression":
             t.start = origin if t.start == "regression" else f"{origin}, then {t.start}"
         if best is None or t.train_l2 < best.train_l2:
@@ -582,13 +581,14 @@ def rollout_lag(rollouts: list[np.ndarray], train: list[Observed], pinned: np.nd
 
 
 def measured_lag(source: str, r: Measured) -> np.ndarray | None:
-    """The rollout lag trials also start along, with the unrefitted start (confirm.refit_or_scale), where the
-    recordings are registered meshes; None on ground truth, where both repeat the old trials at 2-4x their cost.
+    """The rollout lag horizontal trials also start along (lag_start) where the recordings are registered meshes;
+    None on ground truth, where it repeats the other starts' trials.
 
-    Why: both address a one-frame residual that is mostly measurement error (session 32: registered demo meshes,
-    3 mm off the truth). On Blender's ground-truth gravity s1 (20 steps, session 34) they changed nothing the
-    benchmark scores (gravity, -31 % over the folds, tilt 13.8 % off, as before) and made the suite's small
-    Blender tilt diagnosis take 17 min."""
+    Why: it addresses a one-frame residual whose direction is mostly measurement error (session 32: registered
+    demo meshes, 3 mm off the truth). On Blender's ground-truth gravity s1 (20 steps, session 34) it and the
+    unrefitted start (confirm.refit_or_scale, then for registered meshes only) changed nothing the benchmark
+    scores (gravity, -31 % over the folds, tilt 13.8 % off, as before) and made the suite's small Blender tilt
+    diagnosis take 17 min."""
     return r.lag if source == "registered" else None
 
 
@@ -608,8 +608,8 @@ def lag_start(cand: Candidate, sizes: np.ndarray, lag: np.ndarray | None, coefs:
 
 
 def _trial_in_best_form(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulator, ctx: Context,
-                        train: list[Observed], heldout: list[Observed], attached: np.ndarray, config: FitConfig,
-                        unrefitted: bool = False) -> Trial:
+                        train: list[Observed], heldout: list[Observed], attached: np.ndarray, config: FitConfig
+                        ) -> Trial:
     """The trial of `cand` from `coefs` in its own model and in each of its forms (library.Form), keeping the one
     whose refit rolls the TRAINING sequences out best.
 
@@ -620,7 +620,7 @@ def _trial_in_best_form(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulat
     best = None
     for label in ("", *(f.label for f in cand.forms)):
         t = trial(sim, BASELINE_FIT, [(in_form(cand, label), coefs)], ctx, ctx.region, train, heldout, attached,
-                  config, unrefitted)
+                  config)
         t.form = label
         if best is None or t.train_l2 < best.train_l2:
             best = t
@@ -663,8 +663,7 @@ def _reference_trial(cand: Candidate, sim: ImplicitSimulator, r: Measured, regio
     coefs = _regressed(cand, ctx, r, probes)
     start, lag = np.where(coefs != 0, coefs, sizes), measured_lag(req.source, r)
     starts = [("regression", start)] + lag_start(cand, sizes, lag, start)
-    return _best_of_starts(cand, starts, sim, ctx, train, heldout, attached, fit_config(req, req.refit_iterations),
-                           lag is not None)
+    return _best_of_starts(cand, starts, sim, ctx, train, heldout, attached, fit_config(req, req.refit_iterations))
 
 
 def _reference_trials(req: DiagnoseRequest, sim: ImplicitSimulator, r: Measured, region: np.ndarray | None,

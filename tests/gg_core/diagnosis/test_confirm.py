@@ -188,13 +188,3 @@ def test_a_zero_coefficient_is_only_refitted(monkeypatch):
     assert starts == [0.0] and label == "regression" and loss == 1.0
     assert float(sim.cloth.material.density[0]) == pytest.approx(4.0 * true_density)
     assert error == pytest.approx(rollout_error(sim, observed, pinned))
-
-
-def test_without_the_unrefitted_start_only_the_refit_is_scaled(monkeypatch):
-    observed, pinned = _tilted_fall()
-    true_density = float(_hanging(2.0).cloth.material.density[0])
-    starts = _refit_to(monkeypatch, [4.0 * true_density])
-    sim, params = _start(true_density)
-    _, _, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig(), unrefitted=False)
-    assert starts == [0.5] and label.startswith("regression, rollout scale x")      # however badly it refits
-    assert float(sim.cloth.material.density[0]) == pytest.approx(4.0 * true_density)

@@ -272,7 +272,7 @@ def test_the_start_whose_refit_rolls_the_training_sequences_out_best_is_kept(mon
     assert best.start == "probe, then without refit, rollout scale x2"
 
 
-def test_the_lag_and_unrefitted_starts_are_for_registered_meshes_only():
+def test_the_lag_start_is_for_registered_meshes_only():
     measured = SimpleNamespace(lag=np.array([0.004, 0.0, 0.0]))
     assert pipeline.measured_lag("registered", measured) is measured.lag
     assert pipeline.measured_lag("gt", measured) is None
