@@ -581,8 +581,8 @@ def rollout_lag(rollouts: list[np.ndarray], train: list[Observed], pinned: np.nd
 
 
 def measured_lag(source: str, r: Measured) -> np.ndarray | None:
-    """The rollout lag horizontal trials also start along (lag_start) where the recordings are registered meshes;
-    None on ground truth, where it repeats the other starts' trials.
+    """The rollout lag that horizontal trials also start along (lag_start) where the recordings are registered
+    meshes; None on ground truth, where that start repeats the other starts' trials.
 
     Why: it addresses a one-frame residual whose direction is mostly measurement error (session 32: registered
     demo meshes, 3 mm off the truth). On Blender's ground-truth gravity s1 (20 steps, session 34) it and the
