@@ -256,6 +256,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     true_params = truth_parameters(truth)
     gap = None if ref is None else before - ref["heldout_l2"]
     named_refit = accepted["refit"] if accepted and predicted == true_class else None
+    named_final = accepted.get("refit_all_recordings") if accepted and predicted == true_class else None
     folds = fold_gains(report, accepted["name"] if accepted else None, reference[0] if reference else None)
     cv_gain = None if accepted is None or not accepted.get("cross_validated") \
         else accepted["cross_validated"]["heldout_gain"]
@@ -284,6 +285,8 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         "true_parameters": true_params,
         "parameter_error": parameter_error(true_params, named_refit),
         "parameter_errors": parameter_errors(true_params, named_refit),
+        "parameter_error_all_recordings": parameter_error(true_params, named_final),   # pipeline.final_fit
+        "parameter_errors_all_recordings": parameter_errors(true_params, named_final),
         "true_effect_parameter_error": parameter_error(true_params, None if ref is None else ref["refit"]),
         "region_overlap": region_overlap(report, accepted["name"] if accepted and BY_NAME[accepted["name"]].needs_region
                                          else None, np.load(region_path) if region_path else None),
@@ -310,6 +313,8 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
     present = [c for c in cases if c["true_class"] != "none"]
     none = [c for c in cases if c["true_class"] == "none"]
     errors = [c["parameter_error"] for c in present if c["parameter_error"] is not None]
+    final_errors = [c["parameter_error_all_recordings"] for c in present
+                    if c.get("parameter_error_all_recordings") is not None]
     gains = [c["heldout_gain"] for c in present if c["correct"]]
     cv_gains = [c["cross_validated_gain"] for c in present if c["correct"] and c["cross_validated_gain"] is not None]
     closed = [c["gap_closed"] for c in present if c["gap_closed"] is not None]
@@ -339,6 +344,7 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
             "accuracy_resolved_by_reference": mean([float(c["correct"]) for c in resolved]),
             "false_alarm_rate_none": mean([float(not c["correct"]) for c in none]),
             "median_parameter_error": float(np.median(errors)) if errors else None,
+            "median_parameter_error_all_recordings": float(np.median(final_errors)) if final_errors else None,
             "mean_heldout_gain_when_named": mean(gains),
             "mean_cross_validated_gain_when_named": mean(cv_gains),
             "median_gap_closed": float(np.median(closed)) if closed else None,

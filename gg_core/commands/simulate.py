@@ -32,7 +32,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "first frame, e.g. a waistband), 'none', or a .npy/.txt file of vertex indices")
     parser.add_argument("--pin-distance", type=float, default=0.02, help="metres, for --pin auto")
     parser.add_argument("--behavior", type=Path,
-                        help="fitted behaviour (stage4/behavior.npz from `gg behavior`): material and rest lengths")
+                        help="fitted model: stage4/behavior.npz from `gg behavior` (material, rest lengths, terms) or "
+                             "diagnose/model.npz from `gg diagnose` (with the missing physics it found)")
     parser.add_argument("--material", action="append", default=[], metavar="NAME=VALUE",
                         help="uniform material value (density, mu, lam, bending), repeatable")
     parser.add_argument("--force", action="append", default=[], metavar="TERM[:KEY=VALUE,...]",
@@ -77,15 +78,25 @@ def _pinned(args: argparse.Namespace, cloth, body0: np.ndarray, collider) -> np.
     return mask
 
 
-def run(args: argparse.Namespace) -> int:
-    import torch
+def with_overrides(stored: list[tuple[str, dict]], forces: list[tuple[str, dict]]) -> list:
+    """The terms `stored` (a fitted model's, or the defaults) with the command line's `forces` switched on, their
+    parameters replacing the stored ones key by key."""
+    from ..physics.forces import make_terms
 
+    params = {name: dict(p) for name, p in stored}
+    for name, p in forces:
+        params[name] = {**params.get(name, {}), **p}
+    return make_terms([n for n, _ in stored] + [n for n, _ in forces], {n: p for n, p in params.items() if p})
+
+
+def run(args: argparse.Namespace) -> int:
     from ..geometry.meshio import read_mesh, write_ply
     from ..jobs import Progress
     from ..physics.cloth import Cloth
     from ..physics.contact import BodyCollider, penetration_stats
-    from ..physics.forces import DEFAULT_TERMS, make_terms, parse_term_spec
+    from ..physics.forces import DEFAULT_TERMS, parse_term_spec
     from ..physics.material import MATERIAL_NAMES, Material
+    from ..physics.model_file import read_model
     from ..physics.simulator import ClothState, ImplicitSimulator
     from ..storage import write_json
     from ..synth.anchoring import bind
@@ -94,12 +105,15 @@ def run(args: argparse.Namespace) -> int:
     if args.behavior is not None:
         if not args.behavior.is_file():
             raise InputError("no fitted behaviour file", args.behavior, "run gg behavior first, or fix the path")
-        with np.load(args.behavior) as z:
-            fitted = dict(z)
+        try:
+            fitted = read_model(args.behavior)
+        except (ValueError, OSError) as exc:
+            raise InputError(f"fitted behaviour cannot be read ({exc})", args.behavior,
+                             "run gg behavior (or gg diagnose) again") from None
     if args.garment is not None:
         verts, faces = read_mesh(args.garment)
     elif fitted is not None:
-        verts, faces = fitted["template"], fitted["faces"]
+        verts, faces = fitted.cloth.template, fitted.cloth.faces
     else:
         raise InputError("no garment to simulate", "--garment",
                          "pass --garment MESH or --behavior P/stage4/behavior.npz")
@@ -113,15 +127,15 @@ def run(args: argparse.Namespace) -> int:
         values[key] = float(value)
     cloth = Cloth(verts, faces, material=Material.uniform(len(verts), **values))
     if fitted is not None:
-        if len(fitted["template"]) != len(verts) or len(fitted["rest_lengths"]) != len(cloth.rest_lengths):
+        if fitted.cloth.n_vertices != len(verts) or len(fitted.cloth.rest_lengths) != len(cloth.rest_lengths):
             raise InputError("fitted behaviour belongs to another garment mesh", args.behavior,
                              "simulate the garment the behaviour was fitted on (same vertices and faces)")
-        cloth.material = Material(**{n: torch.from_numpy(fitted[n]) for n in MATERIAL_NAMES})
-        cloth.rest_lengths = torch.from_numpy(fitted["rest_lengths"])
+        cloth = Cloth(verts, faces, material=fitted.cloth.material, rest_lengths=fitted.cloth.rest_lengths,
+                      flat=fitted.cloth.flat)
     cloth.pinned = _pinned(args, cloth, body[0], collider)
     try:
-        forces = [parse_term_spec(s) for s in args.force]
-        terms = make_terms(list(DEFAULT_TERMS) + [n for n, _ in forces], dict(forces))
+        stored = [(n, {}) for n in DEFAULT_TERMS] if fitted is None or fitted.terms is None else fitted.terms
+        terms = with_overrides(stored, [parse_term_spec(s) for s in args.force])
     except ValueError as exc:
         raise InputError(str(exc), "--force", "see the force library in gg_core/physics/forces.py") from None
     sim = ImplicitSimulator(cloth, terms=terms, collider=collider, fps=args.fps, substeps=args.substeps)

@@ -98,6 +98,7 @@ class Trial:
     seconds: float = 0.0
     start: str = "regression"   # where the refit started: the regression's coefficients, or the probe sizes
     form: str = ""              # the candidate's Form (library.py) the trial refitted; "" its own model
+    start_coefs: np.ndarray | None = None   # a single candidate's coefficients at that start (final_fit reuses them)
 
 
 def merge(changes: list[ModelChange]) -> ModelChange:
@@ -128,8 +129,15 @@ def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple
           ctx: Context, region: np.ndarray | None, train: list[Observed], heldout: list[Observed],
           pinned: np.ndarray, config: FitConfig) -> Trial:
     """Refit the baseline with the chosen candidates (initial coefficients given) and roll out the held-out
-    sequences. `base_fit` are the term parameters the baseline fitted; the baseline simulator is left unchanged.
-    A single candidate is also tried on the unrefitted baseline (refit_or_scale)."""
+    sequences (none: heldout_l2 is NaN). `base_fit` are the term parameters the baseline fitted; the baseline
+    simulator is left unchanged. A single candidate is also tried on the unrefitted baseline (refit_or_scale)."""
+    return fitted_trial(base, base_fit, chosen, ctx, region, train, heldout, pinned, config)[0]
+
+
+def fitted_trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple[Candidate, np.ndarray]],
+                 ctx: Context, region: np.ndarray | None, train: list[Observed], heldout: list[Observed],
+                 pinned: np.ndarray, config: FitConfig) -> tuple[Trial, ImplicitSimulator]:
+    """trial, and the refitted simulator itself (what the diagnosis delivers of its final fit)."""
     start = time.perf_counter()
     change = merge([cand.model(coefs, ctx) for cand, coefs in chosen])
     cloth = copy.deepcopy(base.cloth)
@@ -146,9 +154,9 @@ def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple
         train_error, start_label = mean_rollout_error(sim, train, pinned), "regression"
         if len(chosen) == 1:
             train_error, start_label = rollout_choice(sim, chosen[0][0], ctx, train, pinned, train_error)
-    error = mean_rollout_error(sim, heldout, pinned)
+    error = mean_rollout_error(sim, heldout, pinned) if heldout else float("nan")
     return Trial([c.name for c, _ in chosen], error, loss, train_error, params.values(), time.perf_counter() - start,
-                 start_label)
+                 start_label, start_coefs=chosen[0][1] if len(chosen) == 1 else None), sim
 
 
 def refit_or_scale(sim: ImplicitSimulator, params: CandidateParams, first: int, train: list[Observed],

@@ -100,14 +100,18 @@ def _png(image: Image.Image) -> str:
 
 def sentence(effect: dict, before: float) -> str:
     """One sentence: what was missing, how strong, where and when it shows, how much adding it helps."""
-    values = effect["refit"] or {}
+    everything = effect.get("refit_all_recordings")
+    values = everything or effect["refit"] or {}
     params = ", ".join(f"{k} = {_fmt(v)}" for k, v in values.items() if not k.startswith("material."))
     if "gravity_offset.delta_g" in values:
         params += f" ({tilt_phrase(values['gravity_offset.delta_g'])})"
     return (f"Missing {effect['name'].replace('_', ' ')} ({effect['class'].replace('_', ' ')}): "
-            f"{effect['description']}; refitted {params}. The residual it explains is largest where "
+            f"{effect['description']}; refitted{' on every recording' if everything else ''} {params}. "
+            f"The residual it explains is largest where "
             f"{effect['evidence']['where'].replace('_', ' ')} is high and in frames with high "
-            f"{effect['evidence']['when'].replace('_', ' ')}. With it, the held-out rollout error goes from "
+            f"{effect['evidence']['when'].replace('_', ' ')}. With it"
+            f"{' (refitted on the training recordings alone)' if everything else ''}, the held-out rollout error "
+            f"goes from "
             f"{before * 1e3:.1f} mm to {effect['heldout_l2'] * 1e3:.1f} mm ({effect['heldout_gain']:+.0%} gain)"
             + cross_validated_phrase(effect) + residual_choice_phrase(effect) + unresolved_phrase(effect) + ".")
 

@@ -6,7 +6,8 @@ the ground-truth meshes instead (motion.py: `--source`), optionally with added n
 frame; vertices that move rigidly with the body surface in every training frame (waistbands, top bands) are
 treated as attached and follow their observed positions.
 
-Outputs: <project>/stage4/behavior.npz (template, faces, attached mask, per-vertex material, rest lengths) and
+Outputs: <project>/stage4/behavior.npz (template, faces, attached mask, per-vertex material, rest lengths, the
+terms with their fitted parameters: physics/model_file.py) and
 <project>/reports/behavior.json (held-out and training L2 before/after, fitted parameters, timings).
 L2 is the mean vertex distance (m) between a free rollout (from the observed first frames, attached vertices
 following their observations) and the observed sequence. Fitted to registered meshes of a synthetic capture, the
@@ -31,7 +32,7 @@ from ..geometry.meshio import read_mesh
 from ..metrics.surface import surface_metrics
 from ..physics.fitting import FitConfig, Observed, fit_behavior, free_rollout, rollout_distance
 from ..physics.forces import DEFAULT_TERMS, make_terms
-from ..physics.material import MATERIAL_NAMES
+from ..physics.model_file import model_arrays
 from ..physics.simulator import ImplicitSimulator
 from ..storage import write_npz, write_report
 from ..synth.anchoring import bind
@@ -209,9 +210,7 @@ def run_behavior(req: BehaviorRequest) -> Path:
     timings["evaluate_fitted_s"] = time.perf_counter() - t
 
     mat = cloth.material
-    write_npz(out, template=cloth.template, faces=cloth.faces, attached=attached,
-              rest_lengths=cloth.rest_lengths.detach().numpy(),
-              **{n: getattr(mat, n).detach().numpy() for n in MATERIAL_NAMES})
+    write_npz(out, **model_arrays(cloth, sim.terms, attached))
     timings["total_s"] = time.perf_counter() - start
     rest_scale = (cloth.rest_lengths / params.base_rest).detach().numpy()
     default, fitted = summary["heldout_l2_default"], summary["heldout_l2_fitted"]

@@ -21,6 +21,9 @@ it through the force library, refit, and show the held-out rollout error before 
    the `fold_finalists` that gained most are refitted again with each training sequence held out in turn, and
    confirmed on the mean held-out gain over these folds (gg_core/diagnosis/folds.py); of the confirmed, the one
    whose smaller mean gain (training or held-out rollouts) is largest is accepted.
+6. Final fit: the accepted model refitted on every recording, held-out ones included, from its trial's form and
+   start: the parameters delivered (report: `final_fit`, each accepted effect's `refit_all_recordings`); every
+   held-out figure stays the split's (pipeline.final_fit).
 
 Data: registered meshes (P/stage2/<seq>/meshes/<frame>.ply) or, for synthetic captures, the ground-truth meshes,
 optionally with spatially correlated noise (motion.py: `--source`, auto by default). truth.json is read only for
@@ -29,7 +32,9 @@ the train / held-out split the behaviour stage uses.
 Outputs: P/reports/diagnose.json, P/reports/diagnose.html, P/diagnose/residual_vertex.npy ([V], m/s^2),
 P/diagnose/activity_vertex.npy ([V], robust z of the recorded over the simulated strain activity),
 P/diagnose/residual_frame.json, P/diagnose/template.ply (the mesh the vertex maps and region refer to: the
-observed mesh, or its remeshed copy when it has more than `sim_vertices` vertices, motion.simulation_mesh).
+observed mesh, or its remeshed copy when it has more than `sim_vertices` vertices, motion.simulation_mesh), and where
+an effect was accepted P/diagnose/model.npz: the final fit's garment and terms (physics/model_file.py), which
+`gg simulate --behavior` rolls out on new motions.
 """
 from __future__ import annotations
 
@@ -47,7 +52,7 @@ from ..errors import InputError
 from ..geometry.meshio import read_mesh, write_ply
 from ..jobs import Progress
 from ..parallel import check_workers
-from ..storage import atomic_path, file_stamps, write_json, write_report
+from ..storage import atomic_path, file_stamps, write_json, write_npz, write_report
 from .behavior import attached_vertices, hand_mask, split
 from .motion import SIM_VERTICES, garment_files, inputs_key, load_sequence, resolve_source, simulation_mesh
 
@@ -238,13 +243,14 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
 
     from ..diagnosis.pipeline import diagnose  # noqa: PLC0415 - torch only when the stage runs
     from ..diagnosis.report import write_html  # noqa: PLC0415
+    from ..physics.model_file import model_arrays  # noqa: PLC0415
 
     inputs = prepare(req, capture, train_names, heldout_names, source)
     train, heldout, faces = inputs.train, inputs.heldout, inputs.faces
     reference_region = np.load(req.reference_region) if req.reference_region else None
     result = diagnose(replace(req, source=source), train, heldout, faces, inputs.body_faces, inputs.attached,
                       hand_mask(train[0].body.shape[1]), reference_region, inputs.rest,
-                      Progress(STAGE, 10 + req.max_trials + len(req.reference)
+                      Progress(STAGE, 11 + req.max_trials + len(req.reference)
                                + len(train) * (1 + req.fold_finalists + len(req.reference)),
                                req.progress))
     mesh_log, denoised = inputs.mesh_log, inputs.denoised
@@ -256,6 +262,12 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
             np.save(tmp, values.astype(np.float32))
     write_json(out / "residual_frame.json", result.frame_curve(train))
     write_ply(out / "template.ply", train[0].garment[0], faces)
+    model = None
+    if result.final_sim is not None:
+        model = write_npz(out / "model.npz", **model_arrays(result.final_sim.cloth, result.final_sim.terms,
+                                                            inputs.attached))
+    elif (out / "model.npz").is_file():
+        (out / "model.npz").unlink()      # a model of an earlier run that found something: not this result's
     payload = result.summary()
     payload.update({
         "train_sequences": train_names, "heldout_sequences": heldout_names, "source": source,
@@ -268,6 +280,9 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
                     "activity_vertex_unit": "robust z-score of log(recorded / simulated strain activity); below 0 the "
                                             "cloth stretches less than the model says (stiffer), above 0 more",
                     "residual_frame": str(out / "residual_frame.json"), "template": str(out / "template.ply"),
+                    "model": None if model is None else str(model),
+                    "model_meaning": "the garment with the accepted missing physics, refitted on every recording "
+                                     "(final_fit): gg simulate --behavior MODEL --motion NAME --out DIR",
                     "html": str(project / "reports" / f"{STAGE}.html")},
         "inputs": key,
         "timings": {**result.timings, "total_s": time.perf_counter() - start},

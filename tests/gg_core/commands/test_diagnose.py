@@ -126,7 +126,7 @@ def test_bench_scoring():
              {"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
               "cross_validated_gain": 0.3, "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01,
               "true_effect_l2": 0.006, "cross_validated_true_effect_gain": 0.32,
-              "cross_validated_gap_closed": 0.3 / 0.32,
+              "cross_validated_gap_closed": 0.3 / 0.32, "parameter_error_all_recordings": 0.05,
               "resolved_by_reference": True, "rollouts_first": "wind", "true_model_gap_closed": 0.7},
              {"true_class": "wind", "predicted": "gravity", "correct": False, "heldout_gain": 0.1,
               "cross_validated_gain": 0.2, "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01,
@@ -139,6 +139,7 @@ def test_bench_scoring():
     # nor does the reference resolve it: at twice Blender's steps it changes by more than itself
     assert summary["cases_resolved_by_reference"] == 1 and summary["accuracy_resolved_by_reference"] == 1.0
     assert summary["median_parameter_error"] == pytest.approx(0.1) and summary["median_gap_closed"] == 0.6
+    assert summary["median_parameter_error_all_recordings"] == pytest.approx(0.05)   # pipeline.final_fit's
     assert summary["median_true_model_gap_closed"] == 0.7      # only captures of our simulator have a true model
     assert summary["mean_cross_validated_gain_when_named"] == pytest.approx(0.3)   # the wrongly named one not
     assert summary["median_cross_validated_gap_closed"] == pytest.approx(0.3 / 0.32)   # nor here

@@ -64,6 +64,7 @@ def test_a_fitted_behaviour_brings_its_own_garment_mesh(tmp_path):
     """Behaviour fitted to fine registered meshes lives on a remeshed simulation mesh: --behavior alone
     simulates that mesh; a missing file is one error line."""
     from gg_core.physics.cloth import Cloth
+    from gg_core.physics.forces import DEFAULT_TERMS, make_terms
     from gg_core.physics.material import MATERIAL_NAMES, Material
 
     bv, bf = uv_sphere(0.2, 16, 32)
@@ -78,6 +79,37 @@ def test_a_fitted_behaviour_brings_its_own_garment_mesh(tmp_path):
     assert code == 0
     last, faces = read_mesh(sorted((tmp_path / "out").glob("*.ply"))[-1])
     assert len(last) == len(v) and np.array_equal(faces, f)
+    terms = [t["name"] for t in json.loads((tmp_path / "out" / "simulate.json").read_text())["terms"]]
+    assert terms == [t.name for t in make_terms(DEFAULT_TERMS)]          # no terms stored: the defaults
     assert main(["simulate", "--behavior", str(tmp_path / "nope.npz"), "--body", str(tmp_path / "body"),
                  "--out", str(tmp_path / "o")]) == 2
     assert main(["simulate", "--body", str(tmp_path / "body"), "--out", str(tmp_path / "o")]) == 2
+
+
+def test_a_model_file_simulates_with_its_own_terms_and_the_command_line_overrides_them(tmp_path):
+    """diagnose/model.npz carries the missing physics the diagnosis found (here a tilt of gravity along +x): the
+    garment simulated from it drifts along the tilt; --force replaces a stored parameter."""
+    from gg_core.physics.cloth import Cloth
+    from gg_core.physics.forces import DEFAULT_TERMS, make_terms
+    from gg_core.physics.model_file import model_arrays
+    from gg_core.storage import write_npz
+
+    bv, bf = uv_sphere(0.1, 8, 16, center=(0.0, -3.0, 0.0))         # a body far below: free fall
+    for k in range(6):
+        write_ply(tmp_path / "body" / f"{k:04d}.ply", bv, bf)
+    v, f = sheet(4, 4, 0.3, 0.3)
+    terms = make_terms(list(DEFAULT_TERMS) + ["gravity_offset"], {"gravity_offset": {"delta_g": (3.0, 0.0, 0.0)}})
+    write_npz(tmp_path / "model.npz", **model_arrays(Cloth(v, f), terms, np.zeros(len(v), bool)))
+
+    def drift(*extra: str) -> tuple[float, list[str]]:
+        out = tmp_path / f"out{len(list(tmp_path.glob('out*')))}"
+        assert main(["simulate", "--behavior", str(tmp_path / "model.npz"), "--body", str(tmp_path / "body"),
+                     "--out", str(out), "--pin", "none", "--progress", "none", *extra]) == 0
+        last, _ = read_mesh(sorted(out.glob("*.ply"))[-1])
+        report = json.loads((out / "simulate.json").read_text())
+        return float(last[:, 0].mean() - v[:, 0].mean()), [t["name"] for t in report["terms"]]
+
+    along, names = drift()
+    assert "gravity_offset" in names and along > 0.01            # 3 m/s^2 over 5 frames: ~2 cm
+    still, names = drift("--force", "gravity_offset:delta_g=0;0;0")
+    assert names.count("gravity_offset") == 1 and abs(still) < 1e-6

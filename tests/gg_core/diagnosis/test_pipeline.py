@@ -292,3 +292,24 @@ def test_a_regressed_start_with_no_other_start_needs_no_probe_forces(monkeypatch
     tilt = pipeline._trial_from_starts(BY_NAME["gravity_offset"], np.array([0.5, 0.0]), None, ctx, [], [], None,
                                        None, 0.5, None)          # ground truth: no lag start either
     assert damping.start == tilt.start == "regression"
+
+
+def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_form_and_start(monkeypatch):
+    """pipeline.final_fit: once held-out rollouts have confirmed a candidate, it is refitted on the training AND
+    the held-out recordings, in the form and from the start its trial kept, with nothing left to hold out."""
+    wind, ctx = BY_NAME["wind"], SimpleNamespace(region=np.ones(3, bool))
+    kept = Trial(["wind"], 0.004, 1.0, 0.005, start="without refit", form="moving air",
+                 start_coefs=np.array([0.2, 0.1]))
+    chosen, model_ctx = pipeline._trialled_model(kept, ctx)
+    ((cand, coefs),) = chosen
+    assert cand.model is MOVING_AIR.model and coefs.tolist() == [0.2, 0.1] and model_ctx is ctx
+    calls = []
+
+    def fake_trial(base, base_fit, chosen, ctx, region, train, heldout, *args):
+        calls.append((chosen, region, [o.name for o in train], heldout))
+        return Trial([c.name for c, _ in chosen], float("nan"), 1.0, 0.003)
+
+    monkeypatch.setattr(pipeline, "trial", fake_trial)
+    recordings = [Observed(n, np.zeros((3, 2, 3)), None, 30.0) for n in ("a", "b", "c")]
+    final = pipeline.final_fit(None, chosen, ctx, recordings, None, None)
+    assert calls == [(chosen, ctx.region, ["a", "b", "c"], [])] and final.train_l2 == 0.003

@@ -37,7 +37,11 @@ def test_sentence_and_page(tmp_path):
     assert "12.0 mm to 6.0 mm" in text and "+50% gain" in text and "gravity_offset.delta_g = (2.1, 0, 0.1)" in text
     assert "material" not in text
     assert "gravity tilted 12.1 deg from the vertical, towards azimuth 3 deg" in text   # atan(2.1 / 9.81)
-    assert "held out in turn" not in text
+    assert "held out in turn" not in text and "every recording" not in text
+    # the model refitted on every recording once confirmed (pipeline.final_fit) says how strong; held out, the split
+    final = sentence({**EFFECT, "refit_all_recordings": {"gravity_offset.delta_g": [1.9, 0.0, 0.2]}}, 0.012)
+    assert "refitted on every recording gravity_offset.delta_g = (1.9, 0, 0.2)" in final and "(2.1" not in final
+    assert "With it (refitted on the training recordings alone), the held-out rollout error goes from 12.0" in final
     folds = sentence({**EFFECT, "cross_validated": {"heldout_gain": 0.31, "folds": 3, "complete": True,
                                                     "refit_range": {"mass_damping.alpha": [7.88, 12.7]}}}, 0.012)
     assert folds.endswith("with each of the 3 recordings held out in turn, it lowers the held-out error by 31% on "

@@ -17,6 +17,7 @@ from gg_core.errors import InputError  # noqa: E402
 from gg_core.geometry.meshio import read_mesh, write_ply  # noqa: E402
 from gg_core.jobs import parse_line  # noqa: E402
 from gg_core.physics.fitting import FitConfig  # noqa: E402
+from gg_core.physics.model_file import read_model  # noqa: E402
 from gg_core.stages.behavior import BehaviorRequest, run_behavior  # noqa: E402
 
 
@@ -35,6 +36,9 @@ def test_behavior_fit_improves_heldout_rollouts(tmp_path):
     assert report["train_l2_fitted"] < report["train_l2_default"]
     with np.load(tmp_path / "project" / "stage4" / "behavior.npz") as z:
         assert z["mu"].shape == (49,) and z["attached"].sum() == report["attached_vertices"]
+    # the fitted contact margin travels with the file (physics/model_file.py), so gg simulate rolls out this fit
+    stored = dict(read_model(tmp_path / "project" / "stage4" / "behavior.npz").terms)
+    assert stored["collision"]["margin"] == pytest.approx(report["fitted"]["terms"]["collision.margin"])
     # resumable: unchanged inputs keep the result, a changed option reruns
     path = tmp_path / "project" / "reports" / "behavior.json"
     written = path.stat().st_mtime_ns

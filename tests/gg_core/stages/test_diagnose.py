@@ -20,6 +20,7 @@ from gg_core.errors import InputError  # noqa: E402
 from gg_core.geometry.meshio import read_mesh  # noqa: E402
 from gg_core.physics.fitting import Observed  # noqa: E402
 from gg_core.physics.material import MATERIAL_SPEC  # noqa: E402
+from gg_core.physics.model_file import read_model  # noqa: E402
 from gg_core.stages.diagnose import DiagnoseRequest, denoise, run_diagnose  # noqa: E402
 
 FAST = {"substeps": 1, "baseline_iterations": 10, "refit_iterations": 6, "bootstrap": 30,
@@ -41,6 +42,15 @@ def test_hidden_gravity_tilt_is_named_refitted_and_improves_heldout(tilted, tmp_
     effect = report["effects"][0]
     assert effect["name"] == "gravity_offset" and effect["uncertainty"]["inclusion_probability"] >= 0.9
     assert effect["refit"]["gravity_offset.delta_g"][0] == pytest.approx(2.0, rel=0.2)
+    # refitted on all three recordings once confirmed (pipeline.final_fit): what the report's sentence states
+    final = effect["refit_all_recordings"]
+    assert final == report["final_fit"]["refit"] and final["gravity_offset.delta_g"][0] == pytest.approx(2.0, rel=0.2)
+    assert final != effect["refit"] and report["final_fit"]["train_rollout_l2"] > 0
+    # ... and delivered as a model file gg simulate rolls out: the garment with the tilt and the final fit's values
+    model = read_model(report["outputs"]["model"])
+    assert dict(model.terms)["gravity_offset"]["delta_g"] == final["gravity_offset.delta_g"]
+    assert model.cloth.flat and model.cloth.n_vertices == len(read_mesh(project / "diagnose" / "template.ply")[0])
+    assert float(model.cloth.material.density[0]) == pytest.approx(final["material.density"])
     assert report["heldout_l2_after"] < 0.5 * report["heldout_l2_before"]
     # the recordings hang off the baseline's rollouts along the tilt (+x), not across it
     lag = report["baseline"]["train_rollout_lag_x_mm"], report["baseline"]["train_rollout_lag_z_mm"]
@@ -66,7 +76,8 @@ def test_nothing_hidden_gives_verdict_none(tmp_path):
     report = json.loads(run_diagnose(DiagnoseRequest(capture=capture, project=tmp_path / "p", workers=1,
                                                      reference=["gravity_offset"], **FAST)).read_text())
     assert report["verdict"] == "none" and report["accepted"] == []
-    assert report["heldout_l2_after"] == report["heldout_l2_before"]
+    assert report["heldout_l2_after"] == report["heldout_l2_before"] and report["final_fit"] is None
+    assert report["outputs"]["model"] is None and not (tmp_path / "p" / "diagnose" / "model.npz").exists()
     folds = report["cross_validation"]["folds"]
     assert [f["heldout"] for f in folds] == [["c"], ["a"], ["b"]]
     assert all(set(f["given_truth"]) == {"gravity_offset"} for f in folds)
@@ -130,8 +141,9 @@ def test_blender_gravity_tilt_is_named(blender_capture, tmp_path):
     assert folds["gravity_offset"]["folds"] == folds["wind"]["folds"] == 3    # the rival was cross-validated too
     assert report["heldout_l2_after"] < 0.9 * report["heldout_l2_before"]
     effect = next(e for e in report["effects"] if e["name"] == report["accepted"][0])
-    delta_g = effect["refit"]["gravity_offset.delta_g"]
-    assert delta_g[0] > 0.5 and abs(delta_g[2]) < 0.5 * delta_g[0]      # tilted towards +X (azimuth 0)
+    for fit in ("refit", "refit_all_recordings"):      # the split's fit and the one on every recording (final_fit)
+        delta_g = effect[fit]["gravity_offset.delta_g"]
+        assert delta_g[0] > 0.5 and abs(delta_g[2]) < 0.5 * delta_g[0]      # tilted towards +X (azimuth 0)
 
 
 @pytest.mark.bpy
