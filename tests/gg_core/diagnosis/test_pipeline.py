@@ -307,9 +307,10 @@ def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_form_
 
     def fake_trial(base, base_fit, chosen, ctx, region, train, heldout, *args):
         calls.append((chosen, region, [o.name for o in train], heldout))
-        return Trial([c.name for c, _ in chosen], float("nan"), 1.0, 0.003)
+        return Trial([c.name for c, _ in chosen], float("nan"), 1.0, 0.003), "the refitted simulator"
 
-    monkeypatch.setattr(pipeline, "trial", fake_trial)
+    monkeypatch.setattr(pipeline, "fitted_trial", fake_trial)
     recordings = [Observed(n, np.zeros((3, 2, 3)), None, 30.0) for n in ("a", "b", "c")]
-    final = pipeline.final_fit(None, chosen, ctx, recordings, None, None)
+    final, simulator = pipeline.final_fit(None, chosen, ctx, recordings, None, None)
     assert calls == [(chosen, ctx.region, ["a", "b", "c"], [])] and final.train_l2 == 0.003
+    assert simulator == "the refitted simulator"                 # what stages.diagnose writes as model.npz
