@@ -130,8 +130,8 @@ def run(args: argparse.Namespace) -> int:
         if fitted.cloth.n_vertices != len(verts) or len(fitted.cloth.rest_lengths) != len(cloth.rest_lengths):
             raise InputError("fitted behaviour belongs to another garment mesh", args.behavior,
                              "simulate the garment the behaviour was fitted on (same vertices and faces)")
-        cloth = Cloth(verts, faces, material=fitted.cloth.material, rest_lengths=fitted.cloth.rest_lengths,
-                      flat=fitted.cloth.flat)
+        cloth.material, cloth.rest_lengths, cloth.flat = (fitted.cloth.material, fitted.cloth.rest_lengths,
+                                                          fitted.cloth.flat)
     cloth.pinned = _pinned(args, cloth, body[0], collider)
     try:
         stored = [(n, {}) for n in DEFAULT_TERMS] if fitted is None or fitted.terms is None else fitted.terms
