@@ -63,6 +63,26 @@ class GG_PT_stages(_Sidebar, Panel):
             layout.label(text=settings.diagnosis, icon="INFO")
 
 
+class GG_PT_simulate(_Sidebar, Panel):
+    """Use the fitted asset: the diagnosed model (or the fitted behaviour) on a built-in motion, with its body."""
+
+    bl_idname = "GG_PT_simulate"
+    bl_label = "Simulate"
+    bl_parent_id = GG_PT_garments.bl_idname
+
+    def draw(self, context: Context) -> None:
+        settings = context.scene.gg
+        layout = self.layout
+        col = layout.column(align=True)
+        col.prop(settings, "simulation_model")
+        col.prop(settings, "simulation_motion")
+        col.prop(settings, "simulation_frames")
+        row = layout.row(align=True)
+        row.enabled = bool(settings.project_path)
+        row.operator("gg.simulate_garment", icon="PLAY")
+        row.operator("gg.load_simulations", text="", icon="FILE_REFRESH")
+
+
 class GG_PT_job(_Sidebar, Panel):
     bl_idname = "GG_PT_job"
     bl_label = "Job"
@@ -80,5 +100,5 @@ class GG_PT_job(_Sidebar, Panel):
             layout.label(text="No job has run yet")
 
 
-CLASSES = (GG_PT_garments, GG_PT_stages, GG_PT_job)
+CLASSES = (GG_PT_garments, GG_PT_stages, GG_PT_simulate, GG_PT_job)
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -2,8 +2,18 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 from bpy.types import PropertyGroup
+
+from ..gg_core.body.motions import MOTIONS
+
+# which fitted model Simulate rolls out: (key, label, description); operators.stages.SIMULATION_MODELS says where
+# each lives in the project
+SIMULATION_MODEL_ITEMS = [
+    ("diagnosed", "Diagnosed Model", "diagnose/model.npz: the fitted simulator with the missing physics the diagnosis "
+                                     "found and confirmed"),
+    ("behaviour", "Fitted Behaviour", "stage4/behavior.npz: the material and rest lengths of Fit Behaviour"),
+]
 
 
 class GG_SceneSettings(PropertyGroup):
@@ -13,6 +23,13 @@ class GG_SceneSettings(PropertyGroup):
                                  description="Project folder where the stages write their results")
     behavior: StringProperty(name="Behaviour", description="Held-out rollout error of the last loaded behaviour fit")
     diagnosis: StringProperty(name="Diagnosis", description="Verdict of the last loaded physics diagnosis")
+    simulation_model: EnumProperty(name="Model", items=SIMULATION_MODEL_ITEMS, default="diagnosed",
+                                   description="Fitted garment model to simulate")
+    simulation_motion: EnumProperty(name="Motion", items=[(m, m.replace("_", " ").title(), f"built-in {m} motion")
+                                                          for m in MOTIONS], default="walk",
+                                    description="Built-in motion of the default body to simulate the garment on")
+    simulation_frames: IntProperty(name="Frames", default=60, min=1, max=2000,
+                                   description="Frames of the motion (after 15 frames blending in from the rest pose)")
 
 
 class GG_JobProperties(PropertyGroup):

@@ -1,9 +1,9 @@
 """Bring stage results into the scene: the stage-1 template, registered sequences, the fitted material, the
-residual heat map.
+residual heat map, simulations of a fitted model with their body.
 
 Each loader reads the project folder the stages wrote (layout in gg_core.stages; no torch here) and replaces
 what an earlier load of the same result created, so re-running a stage and loading again never piles up
-duplicates. Registered sequences are animated like the imported body: one mesh + a PC2 Mesh Cache.
+duplicates. Registered sequences and simulations are animated like the imported body: one mesh + a PC2 Mesh Cache.
 """
 from __future__ import annotations
 
@@ -104,27 +104,82 @@ class GG_OT_load_registration(_Loader):
 
     @staticmethod
     def _sequence(scene: Scene, name: str, files: list[Path], project: Path) -> int:
-        frames, faces0 = [], None
-        for path in files:
-            verts, faces = read_mesh(path)
-            if faces0 is None:
-                faces0 = faces
-            elif not np.array_equal(faces, faces0):
-                raise InputError("registered meshes change topology", path, f"run Register Sequences again for {name}")
-            frames.append(to_blender_points(verts))
-        positions = np.stack(frames)
+        positions, faces0 = _mesh_frames(files, "registered meshes", f"run Register Sequences again for {name}")
         # Place the animation on the capture's timeline: the imported sequence keeps its frame names.
         collection = next((c for c in bpy.data.collections if c.get("gg_sequence") == name), None)
         names = list(collection["gg_frames"]) if collection is not None and "gg_frames" in collection else []
         first = files[0].stem
         frame_start = scene.frame_start + (names.index(first) if first in names else 0)
-        obj = mesh_object(f"{name}_garment", positions[0], faces0)
-        obj["gg_result"] = f"{name}_garment"
+        obj = _animated_mesh(f"{name}_garment", positions, faces0, project / "blender" / f"{name}_garment.pc2",
+                             frame_start, "Registered Motion")
         obj["gg_sequence"] = name
-        if len(positions) > 1:
-            add_mesh_cache(obj, positions, project / "blender" / f"{name}_garment.pc2", frame_start,
-                           "Registered Motion")
         _replace_object(obj, collection if collection is not None else _results_collection(scene))
+        return len(files)
+
+
+def _mesh_frames(files: list[Path], what: str, how: str) -> tuple[np.ndarray, np.ndarray]:
+    """Positions [T, V, 3] (Z-up) and faces of one mesh per frame; InputError where the topology changes."""
+    frames, faces0 = [], None
+    for path in files:
+        verts, faces = read_mesh(path)
+        if faces0 is None:
+            faces0 = faces
+        elif not np.array_equal(faces, faces0):
+            raise InputError(f"{what} change topology", path, how)
+        frames.append(to_blender_points(verts))
+    return np.stack(frames), faces0
+
+
+def _animated_mesh(result: str, positions: np.ndarray, faces: np.ndarray, cache: Path, frame_start: int,
+                   label: str) -> Object:
+    """A mesh tagged `result` at the first of `positions` [T, V, 3], played back through a Mesh Cache at `cache`."""
+    obj = mesh_object(result, positions[0], faces)
+    obj["gg_result"] = result
+    if len(positions) > 1:
+        add_mesh_cache(obj, positions, cache, frame_start, label)
+    return obj
+
+
+class GG_OT_load_simulations(_Loader):
+    """Play back every simulation of the project (Simulate Garment): the garment and the body it moved with, from
+    the scene's first frame, one collection per simulation"""
+
+    bl_idname = "gg.load_simulations"
+    bl_label = "Load Simulations"
+
+    def load(self, scene: Scene, project: Path) -> str:
+        folders = sorted(p.parent for p in (project / "simulate").glob("*/simulate.json"))
+        if not folders:
+            raise InputError("no simulations", project / "simulate", "run Simulate Garment first")
+        frames = [self._simulation(scene, folder, project) for folder in folders]
+        return f"simulations: {', '.join(f'{f.name} ({n} frames)' for f, n in zip(folders, frames))}"
+
+    @staticmethod
+    def _simulation(scene: Scene, folder: Path, project: Path) -> int:
+        how = f"run Simulate Garment again for {folder.name}"
+        report = _report_file(folder / "simulate.json", how)
+        files = [folder / f"{t:06d}.ply" for t in range(int(report.get("frames", 0)))]
+        if not files or not all(f.is_file() for f in files):
+            raise InputError(f"simulation is missing garment frames (simulate.json says {len(files)})", folder, how)
+        positions, faces = _mesh_frames(files, "simulated garment meshes", how)
+        collection = _results_collection(scene, f"gg_sim_{folder.name}")
+        cache = project / "blender" / "simulate"
+        _replace_object(_animated_mesh(f"{folder.name}_garment", positions, faces,
+                                       cache / f"{folder.name}_garment.pc2", scene.frame_start, "Simulated Motion"),
+                        collection)
+        body_path = folder / "body.npz"
+        if body_path.is_file():      # built-in motions; a simulation on a body folder shows the user's own meshes
+            try:
+                with np.load(body_path) as z:
+                    body, body_faces = z["positions"], z["faces"]
+            except (OSError, ValueError, KeyError) as exc:
+                raise InputError(f"simulated body cannot be read ({exc.__class__.__name__})", body_path, how) from None
+            if len(body) != len(positions):
+                raise InputError(f"simulated body has {len(body)} frames for {len(positions)} garment frames",
+                                 body_path, how)
+            body = np.stack([to_blender_points(b) for b in body])
+            _replace_object(_animated_mesh(f"{folder.name}_body", body, body_faces, cache / f"{folder.name}_body.pc2",
+                                           scene.frame_start, "Body Motion"), collection)
         return len(files)
 
 
@@ -153,7 +208,11 @@ def _second_map(obj: Object, values: np.ndarray, attribute: str) -> None:
 
 
 def _report(project: Path, stage: str, how: str) -> dict:
-    path = _required(project / "reports" / f"{stage}.json", how)
+    return _report_file(_required(project / "reports" / f"{stage}.json", how), how)
+
+
+def _report_file(path: Path, how: str) -> dict:
+    stage = path.stem
     try:
         return json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
@@ -273,4 +332,5 @@ def _attribute_material(attribute: str) -> bpy.types.Material:
     return material
 
 
-CLASSES = (GG_OT_load_template, GG_OT_load_registration, GG_OT_show_behavior, GG_OT_show_residuals)
+CLASSES = (GG_OT_load_template, GG_OT_load_registration, GG_OT_show_behavior, GG_OT_show_residuals,
+           GG_OT_load_simulations)

@@ -71,4 +71,45 @@ class GG_OT_diagnose_physics(_StageJob):
     stage, then = "diagnose", "show_residuals"
 
 
-CLASSES = (GG_OT_reconstruct_template, GG_OT_register_sequences, GG_OT_fit_behavior, GG_OT_diagnose_physics)
+# properties.SIMULATION_MODEL_ITEMS key -> (model file in the project, how to make it)
+SIMULATION_MODELS = {
+    "diagnosed": ("diagnose/model.npz", "run Diagnose Physics first (it writes a model only when it finds missing "
+                                        "physics; otherwise simulate the Fitted Behaviour)"),
+    "behaviour": ("stage4/behavior.npz", "run Fit Behaviour first"),
+}
+
+
+def simulate_arguments(context: Context) -> list[str]:
+    """`gg simulate` arguments for the panel's model, motion and frames; InputError when the model is missing. The
+    output folder is simulate/<model>_<motion> in the project, replaced by a rerun."""
+    settings = context.scene.gg
+    if not settings.project_path:
+        raise InputError("no project folder set", "Garments panel > Project", "choose the folder the stages write to")
+    project = Path(bpy.path.abspath(settings.project_path))
+    relative, how = SIMULATION_MODELS[settings.simulation_model]
+    model = project / relative
+    if not model.is_file():
+        raise InputError(f"no {relative} in the project", model, how)
+    out = project / "simulate" / f"{settings.simulation_model}_{settings.simulation_motion}"
+    return ["--behavior", str(model), "--motion", settings.simulation_motion,
+            "--frames", str(settings.simulation_frames), "--out", str(out)]
+
+
+class GG_OT_simulate_garment(Operator):
+    """Simulate the fitted garment model (with the missing physics the diagnosis found, or the fitted behaviour) on
+    a built-in motion of the default body, then play it back with the body"""
+
+    bl_idname = "gg.simulate_garment"
+    bl_label = "Simulate Garment"
+
+    def execute(self, context: Context) -> set[str]:
+        try:
+            arguments = simulate_arguments(context)
+        except InputError as exc:
+            self.report({"ERROR"}, exc.line())
+            return {"CANCELLED"}
+        return bpy.ops.gg.run_job(stage="simulate", arguments=shlex.join(arguments), then="load_simulations")
+
+
+CLASSES = (GG_OT_reconstruct_template, GG_OT_register_sequences, GG_OT_fit_behavior, GG_OT_diagnose_physics,
+           GG_OT_simulate_garment)

@@ -21,7 +21,9 @@ def configure(parser: argparse.ArgumentParser) -> None:
     body = parser.add_mutually_exclusive_group(required=True)
     body.add_argument("--body", type=Path, help="folder of body meshes, one per frame (sorted by name)")
     body.add_argument("--motion", help="built-in motion of the default body (e.g. walk, arm_swing, jump)")
-    parser.add_argument("--out", type=Path, required=True, help="output folder: <frame>.ply per frame + simulate.json")
+    parser.add_argument("--out", type=Path, required=True,
+                        help="output folder: <frame>.ply per frame + simulate.json (+ body.npz for --motion: the "
+                             "body frames, for the add-on to show the body moving with the garment)")
     parser.add_argument("--frames", type=int, default=60, help="frames of --motion (after the settle frames)")
     parser.add_argument("--settle", type=int, default=15,
                         help="frames of --motion that blend from the rest pose into the motion first")
@@ -98,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     from ..physics.material import MATERIAL_NAMES, Material
     from ..physics.model_file import read_model
     from ..physics.simulator import ClothState, ImplicitSimulator
-    from ..storage import write_json
+    from ..storage import write_json, write_npz
     from ..synth.anchoring import bind
 
     fitted = None
@@ -154,8 +156,14 @@ def run(args: argparse.Namespace) -> int:
 
     traj = sim.rollout(ClothState(verts.copy(), np.zeros_like(verts)), body, pin_frames=pins, callback=save)
     seconds = time.perf_counter() - start
+    stale = [p for p in args.out.glob("*.ply") if p.stem.isdigit() and int(p.stem) >= len(body)]
+    for path in stale:          # frames of an earlier, longer simulation into the same folder
+        path.unlink()
+    if args.motion:     # the built-in body exists nowhere else on disk
+        write_npz(args.out / "body.npz", positions=body.astype(np.float32), faces=body_faces.astype(np.int32))
     report = write_json(args.out / "simulate.json", {
-        "frames": len(body), "vertices": len(verts), "pinned_vertices": int(cloth.pinned.sum()),
+        "body": "body.npz" if args.motion else str(args.body.resolve()), "frames": len(body),
+        "vertices": len(verts), "pinned_vertices": int(cloth.pinned.sum()),
         "seconds": seconds, "fps": (len(body) - 1) / seconds,
         "penetration": penetration_stats(traj, body, collider),
         "terms": [t.describe() for t in terms], "material": cloth.material.summary()})

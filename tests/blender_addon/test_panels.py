@@ -95,3 +95,13 @@ def test_pipeline_panel_offers_each_stage_and_its_loader(blender, extension_pack
     assert draw(blender, panels.GG_PT_stages)[-2:] == [
         ("label", "Behaviour (registered motion): held-out rollout 31.2 -> 12.5 mm"),
         ("label", "Missing physics: air_drag (+42% held-out)")]
+
+
+def test_simulate_panel_offers_model_motion_and_frames(blender, extension_package):
+    panels = importlib.import_module(f"{extension_package.__name__}.blender_addon.panels")
+    log = draw(blender, panels.GG_PT_simulate)
+    assert [e[1] for e in log if e[0] == "prop"] == ["simulation_model", "simulation_motion", "simulation_frames"]
+    assert [e[1] for e in log if e[0] == "operator"] == ["gg.simulate_garment", "gg.load_simulations"]
+    settings = blender.context.scene.gg
+    assert (settings.simulation_model, settings.simulation_motion) == ("diagnosed", "walk")
+    settings.simulation_motion = "jump"      # every built-in motion is offered

@@ -212,3 +212,17 @@ def test_stage_buttons_need_both_folders(blender, operator):
 def test_load_without_project_is_one_error_line(blender):
     with pytest.raises(RuntimeError, match=r"gg: error: no project folder set"):
         blender.ops.gg.load_template()
+
+
+def test_a_simulation_whose_body_and_garment_disagree_is_refused(blender, tmp_path):
+    out = tmp_path / "simulate" / "behaviour_walk"
+    for t in range(3):
+        write_ply(out / f"{t:06d}.ply", QUAD + [0.0, 0.0, 0.01 * t], TRIS)
+    (out / "simulate.json").write_text(json.dumps({"frames": 3, "body": "body.npz"}))
+    np.savez(out / "body.npz", positions=np.zeros((2, 4, 3), np.float32), faces=TRIS)
+    blender.context.scene.gg.project_path = str(tmp_path)
+    with pytest.raises(RuntimeError, match=r"gg: error: simulated body has 2 frames for 3 garment frames"):
+        blender.ops.gg.load_simulations()
+    (out / "000002.ply").unlink()
+    with pytest.raises(RuntimeError, match=r"gg: error: simulation is missing garment frames \(simulate.json says 3\)"):
+        blender.ops.gg.load_simulations()

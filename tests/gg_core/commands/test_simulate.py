@@ -45,6 +45,9 @@ def test_simulate_skirt_on_motion(tmp_path):
     assert code == 0
     report = json.loads((tmp_path / "out" / "simulate.json").read_text())
     assert report["frames"] == 6 and report["pinned_vertices"] > 0      # the waistband attaches itself
+    with np.load(tmp_path / "out" / report["body"]) as body:           # the body it moved with, for the add-on
+        assert body["positions"].shape == (6, len(load_body().rest_vertices), 3)
+        assert body["faces"].max() < body["positions"].shape[1]
     assert report["penetration"]["max_fraction_deeper"] <= 0.01
 
 
