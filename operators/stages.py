@@ -27,9 +27,12 @@ class _StageJob(Operator):
     stage = ""
     then = ""
 
+    def arguments(self, context: Context) -> list[str]:
+        return stage_arguments(context)
+
     def execute(self, context: Context) -> set[str]:
         try:
-            arguments = stage_arguments(context)
+            arguments = self.arguments(context)
         except InputError as exc:
             self.report({"ERROR"}, exc.line())
             return {"CANCELLED"}
@@ -95,20 +98,16 @@ def simulate_arguments(context: Context) -> list[str]:
             "--frames", str(settings.simulation_frames), "--out", str(out)]
 
 
-class GG_OT_simulate_garment(Operator):
+class GG_OT_simulate_garment(_StageJob):
     """Simulate the fitted garment model (with the missing physics the diagnosis found, or the fitted behaviour) on
     a built-in motion of the default body, then play it back with the body"""
 
     bl_idname = "gg.simulate_garment"
     bl_label = "Simulate Garment"
+    stage, then = "simulate", "load_simulations"
 
-    def execute(self, context: Context) -> set[str]:
-        try:
-            arguments = simulate_arguments(context)
-        except InputError as exc:
-            self.report({"ERROR"}, exc.line())
-            return {"CANCELLED"}
-        return bpy.ops.gg.run_job(stage="simulate", arguments=shlex.join(arguments), then="load_simulations")
+    def arguments(self, context: Context) -> list[str]:
+        return simulate_arguments(context)
 
 
 CLASSES = (GG_OT_reconstruct_template, GG_OT_register_sequences, GG_OT_fit_behavior, GG_OT_diagnose_physics,
