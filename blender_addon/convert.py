@@ -25,7 +25,7 @@ SENSOR_WIDTH_MM = 36.0
 
 
 def to_blender_points(points: np.ndarray) -> np.ndarray:
-    """Y-up world points [N,3] -> Blender Z-up points [N,3]."""
+    """Y-up world points [..., 3] -> Blender Z-up points [..., 3] (any leading shape: one mesh or its frames)."""
     return np.asarray(points, dtype=np.float64) @ Y_UP_TO_Z_UP.T
 
 

@@ -177,9 +177,9 @@ class GG_OT_load_simulations(_Loader):
             if len(body) != len(positions):
                 raise InputError(f"simulated body has {len(body)} frames for {len(positions)} garment frames",
                                  body_path, how)
-            body = np.stack([to_blender_points(b) for b in body])
-            _replace_object(_animated_mesh(f"{folder.name}_body", body, body_faces, cache / f"{folder.name}_body.pc2",
-                                           scene.frame_start, "Body Motion"), collection)
+            _replace_object(_animated_mesh(f"{folder.name}_body", to_blender_points(body), body_faces,
+                                           cache / f"{folder.name}_body.pc2", scene.frame_start, "Body Motion"),
+                            collection)
         return len(files)
 
 

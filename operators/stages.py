@@ -9,6 +9,7 @@ import bpy
 from bpy.types import Context, Operator
 
 from ..gg_core.errors import InputError
+from .results import project_dir
 
 
 def stage_arguments(context: Context) -> list[str]:
@@ -86,9 +87,7 @@ def simulate_arguments(context: Context) -> list[str]:
     """`gg simulate` arguments for the panel's model, motion and frames; InputError when the model is missing. The
     output folder is simulate/<model>_<motion> in the project, replaced by a rerun."""
     settings = context.scene.gg
-    if not settings.project_path:
-        raise InputError("no project folder set", "Garments panel > Project", "choose the folder the stages write to")
-    project = Path(bpy.path.abspath(settings.project_path))
+    project = project_dir(context.scene)
     relative, how = SIMULATION_MODELS[settings.simulation_model]
     model = project / relative
     if not model.is_file():
