@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from gg_core.diagnosis import confirm
-from gg_core.diagnosis.confirm import (CandidateParams, golden_section, refit_or_scale, rollout_choice, rollout_scale,
-                                      scale_label)
+from gg_core.diagnosis.confirm import (CandidateParams, at_values, fitted_trial, golden_section, refit_or_scale,
+                                      rollout_choice, rollout_scale, scale_label)
 from gg_core.diagnosis.library import BY_NAME, Context
 from gg_core.physics.cloth import Cloth
 from gg_core.physics.contact import BodyCollider
@@ -188,3 +188,49 @@ def test_a_zero_coefficient_is_only_refitted(monkeypatch):
     assert starts == [0.0] and label == "regression" and loss == 1.0
     assert float(sim.cloth.material.density[0]) == pytest.approx(4.0 * true_density)
     assert error == pytest.approx(rollout_error(sim, observed, pinned))
+
+
+def _split_fit(density: float) -> dict[str, object]:
+    """Trial.values of a tilt trial that found the truth's 2 m/s^2 on a garment of the given density."""
+    sim = _hanging(2.0)
+    sim.cloth.material = Material.uniform(sim.cloth.n_vertices, density=density)
+    return CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {}).values()
+
+
+def _final_fit(warm: dict[str, object]):
+    """fitted_trial of the tilt on a baseline without one, from its coefficients (0.5, 0) and the split's `warm`."""
+    v, f = sheet(6, 6, 0.3, 0.3)
+    base = ImplicitSimulator(Cloth(v, f, pinned=np.abs(v[:, 2] + 0.15) < 1e-9), terms=make_terms(DEFAULT_TERMS))
+    observed, pinned = _tilted_fall()
+    return fitted_trial(base, ("collision.margin",), [(BY_NAME["gravity_offset"], np.array([0.5, 0.0]))], None,
+                        None, [observed], [], pinned, FitConfig(), warm)
+
+
+def test_a_warm_start_keeps_the_split_fit_where_its_refit_rolls_out_worse(monkeypatch):
+    """pipeline.final_fit starts from the split's fitted values (at_values), not the candidate's start: a refit
+    that spoils the material loses to them."""
+    true_density = float(_hanging(2.0).cloth.material.density[0])
+    starts = _refit_to(monkeypatch, [4.0 * true_density])
+    trial, sim = _final_fit(_split_fit(true_density))
+    assert starts == [pytest.approx(2.0)]                       # the refit started at the split's tilt, not at 0.5
+    assert trial.start == "the split's fit" and trial.values["gravity_offset.delta_g"] == [2.0, 0.0, 0.0]
+    assert float(sim.cloth.material.density[0]) == pytest.approx(true_density)
+    assert trial.train_l2 < 1e-6 and trial.train_loss == 1.0      # evaluated without an iteration at the kept fit
+
+
+def test_a_warm_start_keeps_the_refit_where_it_rolls_out_better(monkeypatch):
+    true_density = float(_hanging(2.0).cloth.material.density[0])
+    _refit_to(monkeypatch, [true_density])
+    trial, sim = _final_fit(_split_fit(1.5 * true_density))
+    assert trial.start == "the split's fit, refitted"
+    assert trial.values["material.density"] == pytest.approx(true_density)
+    assert float(sim.cloth.material.density[0]) == pytest.approx(true_density) and trial.train_l2 < 1e-6
+
+
+def test_at_values_sets_the_material_the_terms_and_the_region_scales():
+    sim = _hanging(0.5)
+    values = {**_split_fit(0.3), "region.stretch_scale": 0.5, "region.bending_scale": 4.0}
+    logs = at_values(sim.cloth, sim, {"stretch": 0.0, "bending": 0.0}, values)
+    assert logs == {"stretch": pytest.approx(np.log(0.5)), "bending": pytest.approx(np.log(4.0))}
+    assert torch.allclose(sim.cloth.material.density, torch.full((sim.cloth.n_vertices,), 0.3, dtype=torch.float64))
+    assert next(t for t in sim.terms if t.name == "gravity_offset").params["delta_g"].tolist() == [2.0, 0.0, 0.0]

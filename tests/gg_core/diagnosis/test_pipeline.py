@@ -294,23 +294,25 @@ def test_a_regressed_start_with_no_other_start_needs_no_probe_forces(monkeypatch
     assert damping.start == tilt.start == "regression"
 
 
-def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_form_and_start(monkeypatch):
+def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_fit(monkeypatch):
     """pipeline.final_fit: once held-out rollouts have confirmed a candidate, it is refitted on the training AND
-    the held-out recordings, in the form and from the start its trial kept, with nothing left to hold out."""
+    the held-out recordings, in the form its trial kept and from that trial's fitted values, with nothing left to
+    hold out."""
     wind, ctx = BY_NAME["wind"], SimpleNamespace(region=np.ones(3, bool))
-    kept = Trial(["wind"], 0.004, 1.0, 0.005, start="without refit", form="moving air",
-                 start_coefs=np.array([0.2, 0.1]))
-    chosen, model_ctx = pipeline._trialled_model(kept, ctx)
+    kept = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.3, 0.0, 0.1]}, start="without refit",
+                 form="moving air", start_coefs=np.array([0.2, 0.1]))
+    chosen, model_ctx, split_fit = pipeline._trialled_model(kept, ctx)
     ((cand, coefs),) = chosen
     assert cand.model is MOVING_AIR.model and coefs.tolist() == [0.2, 0.1] and model_ctx is ctx
+    assert split_fit is kept.values          # where the final fit starts (confirm.refit_or_keep)
     calls = []
 
-    def fake_trial(base, base_fit, chosen, ctx, region, train, heldout, *args):
-        calls.append((chosen, region, [o.name for o in train], heldout))
+    def fake_trial(base, base_fit, chosen, ctx, region, train, heldout, pinned, config, warm):
+        calls.append((chosen, region, [o.name for o in train], heldout, warm))
         return Trial([c.name for c, _ in chosen], float("nan"), 1.0, 0.003), "the refitted simulator"
 
     monkeypatch.setattr(pipeline, "fitted_trial", fake_trial)
     recordings = [Observed(n, np.zeros((3, 2, 3)), None, 30.0) for n in ("a", "b", "c")]
-    final, simulator = pipeline.final_fit(None, chosen, ctx, recordings, None, None)
-    assert calls == [(chosen, ctx.region, ["a", "b", "c"], [])] and final.train_l2 == 0.003
+    final, simulator = pipeline.final_fit(None, chosen, ctx, split_fit, recordings, None, None)
+    assert calls == [(chosen, ctx.region, ["a", "b", "c"], [], kept.values)] and final.train_l2 == 0.003
     assert simulator == "the refitted simulator"                 # what stages.diagnose writes as model.npz
