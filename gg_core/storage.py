@@ -34,6 +34,29 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
             tmp_path.unlink()
 
 
+@contextmanager
+def exclusive(lock_file: str | os.PathLike) -> Iterator[None]:
+    """Hold an exclusive lock on `lock_file` (created if missing) for the block; other processes wait. POSIX
+    only (fcntl); elsewhere the block runs unlocked.
+
+    Why: several `gg bench diagnose` runs share one capture cache (one run per core); two generating the same
+    capture at once removed each other's temporary files (session 43: a gravity and an air damping run both
+    generating the reference capture, one crashed)."""
+    try:
+        import fcntl  # noqa: PLC0415 - POSIX only
+    except ImportError:
+        yield
+        return
+    lock_file = Path(lock_file)
+    lock_file.parent.mkdir(parents=True, exist_ok=True)
+    with open(lock_file, "a+b") as handle:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+
+
 def file_stamps(paths: Iterable[Path], root: Path | None = None) -> list[list]:
     """[name (relative to `root`, else the file name), size, mtime_ns] per file: what a stage's resume key records
     of its input files, so a rewritten input reruns the stage and an untouched one does not."""

@@ -45,6 +45,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..diagnosis.blender_units import offset_tilt, truth_parameters, wind_push
+from ..storage import exclusive
 
 if TYPE_CHECKING:
     from ..stages.diagnose import DiagnoseRequest
@@ -118,20 +119,23 @@ def capture_of(args: argparse.Namespace, name: str, seed: int, effect: str = "no
     from ..synth.generate import SynthRequest, generate
 
     capture = args.cache / name
-    if args.truth_simulator == "ours" and not (capture / "truth.json").is_file():
-        from ..diagnosis.resimulated import resimulate
-        from ..stages.behavior import hand_mask
-        from ..stages.diagnose import DiagnoseRequest
+    with exclusive(args.cache / f".{name}.lock"):     # runs sharing the cache generate each capture once
+        if (capture / "truth.json").is_file():
+            return capture
+        if args.truth_simulator == "ours":
+            from ..diagnosis.resimulated import resimulate
+            from ..stages.behavior import hand_mask
+            from ..stages.diagnose import DiagnoseRequest
 
-        blender = argparse.Namespace(**{**vars(args), "truth_simulator": "blender"})
-        reference = capture_of(blender, case_name(blender, "none", 0.0, seed), seed)
-        resimulate(reference, capture, effect, list(params), hand_mask,
-                   substeps=2 * DiagnoseRequest.substeps * quality_factor)
-    elif not (capture / "truth.json").is_file():
-        steps = args.cloth_steps * quality_factor
-        generate(SynthRequest(preset=preset(args.frames, args.vertices, steps), out=capture, seed=seed,
-                              garment=args.garment, effect=effect, effect_params=list(params), render=False,
-                              progress="none"))
+            blender = argparse.Namespace(**{**vars(args), "truth_simulator": "blender"})
+            reference = capture_of(blender, case_name(blender, "none", 0.0, seed), seed)
+            resimulate(reference, capture, effect, list(params), hand_mask,
+                       substeps=2 * DiagnoseRequest.substeps * quality_factor)
+        else:
+            steps = args.cloth_steps * quality_factor
+            generate(SynthRequest(preset=preset(args.frames, args.vertices, steps), out=capture, seed=seed,
+                                  garment=args.garment, effect=effect, effect_params=list(params), render=False,
+                                  progress="none"))
     return capture
 
 

@@ -195,6 +195,34 @@ def test_bench_captures_of_our_simulator_resimulate_the_blender_reference_of_the
     assert true_model_l2(DiagnoseRequest(capture=reference, project=tmp_path / "q"), report) is None
 
 
+def test_bench_runs_sharing_a_cache_generate_each_capture_once(tmp_path, monkeypatch):
+    """Two runs asking for the same missing capture at once: one generates it, the other waits and reuses it."""
+    import threading  # noqa: PLC0415
+    import time  # noqa: PLC0415
+
+    from gg_core.synth import generate as synth_generate  # noqa: PLC0415
+
+    calls = []
+
+    def slow_generate(req):
+        calls.append(req.out)
+        time.sleep(0.3)
+        (Path(req.out) / "truth.json").parent.mkdir(parents=True, exist_ok=True)
+        (Path(req.out) / "truth.json").write_text("{}")
+
+    monkeypatch.setattr(synth_generate, "generate", slow_generate)
+    args = argparse.Namespace(cache=tmp_path, garment="sheet", truth_simulator="blender", cloth_steps=CLOTH_STEPS,
+                              frames=4, vertices=64)
+    name = case_name(args, "none", 0.0, 1)
+    got = []
+    runs = [threading.Thread(target=lambda: got.append(capture_of(args, name, 1))) for _ in range(2)]
+    for run in runs:
+        run.start()
+    for run in runs:
+        run.join(timeout=30)
+    assert got == [tmp_path / name] * 2 and calls == [tmp_path / name]
+
+
 def test_region_overlap_scores_where_a_region_effect_was_placed():
     truth = np.array([1.0, 1.0, 1.0, 1.0, 0.0, 0.0])
     report = {"localization": {"region_vertices": [4, 5],

@@ -190,6 +190,48 @@ def test_a_zero_coefficient_is_only_refitted(monkeypatch):
     assert error == pytest.approx(rollout_error(sim, observed, pinned))
 
 
+def _stiff_half(bending_log: float) -> tuple[ImplicitSimulator, CandidateParams]:
+    """The hanging sheet (no tilt) with its free half's bending scaled by exp(bending_log), as a region candidate's
+    trial holds it."""
+    sim = _hanging(0.0)
+    region = (sim.cloth.template[:, 2] > 0.0).astype(np.float64)
+    params = CandidateParams(sim.cloth, sim, ("collision.margin",), region, {"bending": bending_log})
+    params.apply(sim.cloth)
+    sim.refresh()
+    return sim, params
+
+
+def test_a_region_start_the_refit_spoils_is_kept_without_a_repeated_refit(monkeypatch):
+    """A region candidate's start (its regression scales) is the unrefitted option too; with nothing to scale,
+    the refit is not repeated from it."""
+    truth, _ = _stiff_half(np.log(30.0))
+    rest = truth.cloth.template
+    observed = Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0)
+    pinned = truth.cloth.pinned
+    calls = []
+
+    def spoiling_refit(sim, params, train, trainable, config):
+        if trainable:
+            calls.append(float(params.region_s[0]))
+            with torch.no_grad():
+                params.region_s[0] = np.log(0.1)     # what the stiff patch's walk-less fold did (session 41)
+        params.apply(sim.cloth)
+        sim.refresh()
+        return float(len(calls))
+
+    monkeypatch.setattr(confirm, "refit", spoiling_refit)
+    sim, params = _stiff_half(np.log(30.0))
+    loss, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
+    assert calls == [pytest.approx(np.log(30.0))] and label == "without refit"
+    assert params.values()["region.bending_scale"] == pytest.approx(30.0)
+    assert error == pytest.approx(rollout_error(sim, observed, pinned)) and error < 1e-9
+    # without a region scale the start is the baseline: only the refit
+    calls.clear()
+    sim, params = _stiff_half(0.0)
+    _, _, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
+    assert calls == [0.0] and label == "regression" and params.values()["region.bending_scale"] == pytest.approx(0.1)
+
+
 def _split_fit(density: float) -> dict[str, object]:
     """Trial.values of a tilt trial that found the truth's 2 m/s^2 on a garment of the given density."""
     sim = _hanging(2.0)
