@@ -58,6 +58,7 @@ RESIDUAL_PREFERENCE = 0.95
 # a horizontal candidate's start along the rollout lag is skipped where its other start points within this angle of
 # it (lag_start); the regression's direction was 26 degrees off on the registered demo meshes (session 32)
 LAG_REDUNDANT_DEG = 10.0
+SPLIT_FIT = "the split's fit"   # final_fit's label of the split's trial's fitted values
 MARGIN_STARTS = (1.0, 3.0)     # baseline fits start from the collision term's default margin times these
 INITIAL_LOSS_FACTOR = 0.1      # internal damping starts at a typical fabric's loss factor at 1 Hz
 
@@ -175,7 +176,8 @@ class Result:
                 "meaning": "the accepted model refitted on every recording once held-out rollouts confirmed it: the "
                            "parameters delivered; the held-out errors are the split's, fitted without those recordings",
                 "refit": self.final.values, "train_rollout_l2": self.final.train_l2, "start": self.final.start,
-                "form": self.final.form or None, "seconds": self.final.seconds},
+                "form": self.final.form or None, "seconds": self.final.seconds,
+                "starts_train_rollout_l2": self.final.compared},
             "baseline": self.baseline,
             "nuisance_adjustment": self.nuisance,
             "selection": {"order": self.selection.order, "rss_after_nuisance": self.selection.rss_nuisance},
@@ -348,7 +350,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
 
     t0 = time.perf_counter()
     accepted, after = passing[:1], (trials[passing[0]].heldout_l2 if passing else before)
-    model = None if not passing else _trialled_model(trials[passing[0]], contexts[passing[0]])
+    model = None if not passing else _trialled_model(passing[0], folds, contexts[passing[0]])
     pair_regions = [contexts[n].region for n in passing[:2] if BY_NAME[n].needs_region]
     one_region = len(pair_regions) < 2 or np.array_equal(*pair_regions)   # one trial holds one region
     if len(passing) > 1 and BY_NAME[passing[0]].equivalence != BY_NAME[passing[1]].equivalence and one_region:
@@ -363,7 +365,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
             unphysical[joint_name] = why
         elif confirmed(joint, trials[passing[0]], req.min_gain, req.min_gain_mm):
             accepted, after = passing[:2], joint.heldout_l2
-            model = (chosen, replace(ctx, region=region), joint.values)
+            model = (chosen, replace(ctx, region=region), [(SPLIT_FIT, joint.values)])
     timings["joint_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -390,21 +392,28 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
                   withheld, rollouts_first, rivals, delivered, delivered_sim)
 
 
-def _trialled_model(t: Trial, ctx: Context) -> tuple[list[tuple[Candidate, np.ndarray]], Context, dict]:
-    """The candidate of the single-candidate trial `t` in the form and at the start its trial kept, its context and
-    the trial's fitted values: what final_fit refits."""
-    (name,) = t.names
-    return [(in_form(BY_NAME[name], t.form), t.start_coefs)], ctx, t.values
+def _trialled_model(name: str, folds: list[Fold], ctx: Context
+                    ) -> tuple[list[tuple[Candidate, np.ndarray]], Context, list[tuple[str, dict]]]:
+    """The candidate `name` in the form and at the start its trial in the split (folds[0]) kept, its context, and
+    the fitted values final_fit starts from: the split's trial's, then those of the other folds' trials in the same
+    form, labelled by what they held out."""
+    t = folds[0].trials[name]
+    fits = [(SPLIT_FIT, t.values)]
+    fits += [(f"the fit without {', '.join(f.heldout)}", f.trials[name].values) for f in folds[1:]
+             if name in f.trials and f.trials[name].form == t.form]
+    return [(in_form(BY_NAME[name], t.form), t.start_coefs)], ctx, fits
 
 
 def final_fit(sim: ImplicitSimulator, chosen: list[tuple[Candidate, np.ndarray]], ctx: Context,
-              split_fit: dict[str, object], recordings: list[Observed], attached: np.ndarray, config: FitConfig
+              fits: list[tuple[str, dict]], recordings: list[Observed], attached: np.ndarray, config: FitConfig
               ) -> tuple[Trial, ImplicitSimulator]:
     """The accepted model refitted on EVERY recording, held-out ones included, once held-out rollouts have
-    confirmed it (confirm.fitted_trial in the accepted trial's form, started from that trial's fitted values
-    `split_fit` and kept only where it rolls every recording out better: confirm.refit_or_keep; no held-out
-    error), and that simulator: the model the diagnosis delivers (stages.diagnose writes it for `gg simulate
-    --behavior`). Every held-out figure of the report stays the split's, whose fit never saw those recordings.
+    confirmed it (confirm.fitted_trial in the accepted trial's form), and that simulator: the model the diagnosis
+    delivers (stages.diagnose writes it for `gg simulate --behavior`). It starts from whichever of the labelled
+    `fits` (the split's fit, the other folds' fits: _trialled_model) rolls every recording out best
+    (confirm.best_fit), and keeps the refit only where it rolls every recording out better still
+    (confirm.refit_or_keep). Every held-out figure of the report stays the split's, whose fit never saw those
+    recordings.
 
     Why: which effect is missing is decided on held-out recordings; the model a user simulates new motions with
     should then have seen every motion recorded (model selection by cross-validation, the selected model fitted on
@@ -416,7 +425,7 @@ def final_fit(sim: ImplicitSimulator, chosen: list[tuple[Candidate, np.ndarray]]
     repeated the split's search with few iterations: on the Blender tilt test's capture at 4 refit iterations the
     tilt came out 2.83 m/s^2 (the split's 2.21, the truth about 2.09); from the split's fit 2.23, in 39 s instead
     of 56 s (/work/data/s42/tilt.py)."""
-    return fitted_trial(sim, BASELINE_FIT, chosen, ctx, ctx.region, recordings, [], attached, config, split_fit)
+    return fitted_trial(sim, BASELINE_FIT, chosen, ctx, ctx.region, recordings, [], attached, config, fits)
 
 
 def usable_candidates(rest_given: bool) -> tuple[list[Candidate], dict[str, str]]:

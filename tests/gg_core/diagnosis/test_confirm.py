@@ -232,20 +232,22 @@ def test_a_region_start_the_refit_spoils_is_kept_without_a_repeated_refit(monkey
     assert calls == [0.0] and label == "regression" and params.values()["region.bending_scale"] == pytest.approx(0.1)
 
 
-def _split_fit(density: float) -> dict[str, object]:
-    """Trial.values of a tilt trial that found the truth's 2 m/s^2 on a garment of the given density."""
-    sim = _hanging(2.0)
+def _split_fit(density: float, tilt: float = 2.0) -> dict[str, object]:
+    """Trial.values of a tilt trial that found `tilt` m/s^2 (the truth's 2) on a garment of the given density."""
+    sim = _hanging(tilt)
     sim.cloth.material = Material.uniform(sim.cloth.n_vertices, density=density)
     return CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {}).values()
 
 
-def _final_fit(warm: dict[str, object]):
-    """fitted_trial of the tilt on a baseline without one, from its coefficients (0.5, 0) and the split's `warm`."""
+def _final_fit(*warm: dict[str, object]):
+    """fitted_trial of the tilt on a baseline without one, from its coefficients (0.5, 0) and the earlier fits
+    `warm` (the split's first)."""
     v, f = sheet(6, 6, 0.3, 0.3)
     base = ImplicitSimulator(Cloth(v, f, pinned=np.abs(v[:, 2] + 0.15) < 1e-9), terms=make_terms(DEFAULT_TERMS))
     observed, pinned = _tilted_fall()
     return fitted_trial(base, ("collision.margin",), [(BY_NAME["gravity_offset"], np.array([0.5, 0.0]))], None,
-                        None, [observed], [], pinned, FitConfig(), warm)
+                        None, [observed], [], pinned, FitConfig(),
+                        [(f"fit {i}", values) for i, values in enumerate(warm)])
 
 
 def test_a_warm_start_keeps_the_split_fit_where_its_refit_rolls_out_worse(monkeypatch):
@@ -255,7 +257,7 @@ def test_a_warm_start_keeps_the_split_fit_where_its_refit_rolls_out_worse(monkey
     starts = _refit_to(monkeypatch, [4.0 * true_density])
     trial, sim = _final_fit(_split_fit(true_density))
     assert starts == [pytest.approx(2.0)]                       # the refit started at the split's tilt, not at 0.5
-    assert trial.start == "the split's fit" and trial.values["gravity_offset.delta_g"] == [2.0, 0.0, 0.0]
+    assert trial.start == "fit 0" and trial.values["gravity_offset.delta_g"] == [2.0, 0.0, 0.0]
     assert float(sim.cloth.material.density[0]) == pytest.approx(true_density)
     assert trial.train_l2 < 1e-6 and trial.train_loss == 1.0      # evaluated without an iteration at the kept fit
 
@@ -264,9 +266,23 @@ def test_a_warm_start_keeps_the_refit_where_it_rolls_out_better(monkeypatch):
     true_density = float(_hanging(2.0).cloth.material.density[0])
     _refit_to(monkeypatch, [true_density])
     trial, sim = _final_fit(_split_fit(1.5 * true_density))
-    assert trial.start == "the split's fit, refitted"
+    assert trial.start == "fit 0, refitted"
     assert trial.values["material.density"] == pytest.approx(true_density)
     assert float(sim.cloth.material.density[0]) == pytest.approx(true_density) and trial.train_l2 < 1e-6
+
+
+def test_the_final_fit_starts_from_the_earlier_fit_that_rolls_out_best(monkeypatch):
+    """pipeline.final_fit also starts from the other folds' fits (confirm.best_fit): where the split's tilt is half
+    the truth's and a fold found it, the fold's fit is delivered, and the refit that spoils the material is not."""
+    true_density = float(_hanging(2.0).cloth.material.density[0])
+    starts = _refit_to(monkeypatch, [4.0 * true_density])
+    trial, sim = _final_fit(_split_fit(true_density, 1.0), _split_fit(true_density, 3.0),
+                            _split_fit(true_density))
+    assert trial.start == "fit 2" and starts == [pytest.approx(2.0)]   # refitted once, from the best fit only
+    assert trial.values["gravity_offset.delta_g"] == [2.0, 0.0, 0.0] and trial.train_l2 < 1e-6
+    assert set(trial.compared) == {"fit 0", "fit 1", "fit 2"} and min(trial.compared.values()) == trial.train_l2
+    assert trial.compared["fit 0"] > 1e-4 and trial.compared["fit 1"] > 1e-4
+    assert float(sim.cloth.material.density[0]) == pytest.approx(true_density)
 
 
 def test_at_values_sets_the_material_the_terms_and_the_region_scales():

@@ -10,7 +10,7 @@ from diagnosis_helpers import fold
 
 from gg_core.diagnosis import pipeline
 from gg_core.diagnosis.confirm import Trial
-from gg_core.diagnosis.folds import CrossValidation
+from gg_core.diagnosis.folds import CrossValidation, Fold
 from gg_core.diagnosis.library import BY_NAME, CANDIDATES, MOVING_AIR
 from gg_core.diagnosis.pipeline import (confirmed, implausible, judge_reference, named_first, propose, selected,
                                        unresolved, usable_candidates)
@@ -294,17 +294,21 @@ def test_a_regressed_start_with_no_other_start_needs_no_probe_forces(monkeypatch
     assert damping.start == tilt.start == "regression"
 
 
-def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_fit(monkeypatch):
+def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_fits(monkeypatch):
     """pipeline.final_fit: once held-out rollouts have confirmed a candidate, it is refitted on the training AND
-    the held-out recordings, in the form its trial kept and from that trial's fitted values, with nothing left to
-    hold out."""
+    the held-out recordings, in the form its trial kept, from the split's fitted values and the other folds' fits
+    in that form, with nothing left to hold out."""
     wind, ctx = BY_NAME["wind"], SimpleNamespace(region=np.ones(3, bool))
     kept = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.3, 0.0, 0.1]}, start="without refit",
                  form="moving air", start_coefs=np.array([0.2, 0.1]))
-    chosen, model_ctx, split_fit = pipeline._trialled_model(kept, ctx)
+    fold_a = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.4, 0.0, 0.1]}, form="moving air")
+    fold_b = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.5, 0.0, 0.1]})   # another form: not a start
+    folds = [Fold(["a", "b"], ["c"], kept, {"wind": kept}), Fold(["b", "c"], ["a"], kept, {"wind": fold_a}),
+             Fold(["a", "c"], ["b"], kept, {"wind": fold_b}), Fold(["a"], ["b", "c"], kept, {})]
+    chosen, model_ctx, fits = pipeline._trialled_model("wind", folds, ctx)
     ((cand, coefs),) = chosen
     assert cand.model is MOVING_AIR.model and coefs.tolist() == [0.2, 0.1] and model_ctx is ctx
-    assert split_fit is kept.values          # where the final fit starts (confirm.refit_or_keep)
+    assert fits == [("the split's fit", kept.values), ("the fit without a", fold_a.values)]   # where it starts
     calls = []
 
     def fake_trial(base, base_fit, chosen, ctx, region, train, heldout, pinned, config, warm):
@@ -313,6 +317,6 @@ def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_fit(m
 
     monkeypatch.setattr(pipeline, "fitted_trial", fake_trial)
     recordings = [Observed(n, np.zeros((3, 2, 3)), None, 30.0) for n in ("a", "b", "c")]
-    final, simulator = pipeline.final_fit(None, chosen, ctx, split_fit, recordings, None, None)
-    assert calls == [(chosen, ctx.region, ["a", "b", "c"], [], kept.values)] and final.train_l2 == 0.003
+    final, simulator = pipeline.final_fit(None, chosen, ctx, fits, recordings, None, None)
+    assert calls == [(chosen, ctx.region, ["a", "b", "c"], [], fits)] and final.train_l2 == 0.003
     assert simulator == "the refitted simulator"                 # what stages.diagnose writes as model.npz
