@@ -272,6 +272,32 @@ def test_the_start_whose_refit_rolls_the_training_sequences_out_best_is_kept(mon
     assert best.start == "probe, then without refit, rollout scale x2"
 
 
+def test_a_region_regressed_to_its_largest_change_also_starts_from_the_probe_sizes(monkeypatch):
+    """pipeline.saturated: a region candidate on a bound away from zero (x0.1 softer) is also started from its probe
+    sizes; within its bounds, or a term on its zero bound beside a nonzero coefficient, it is not."""
+    stiff = BY_NAME["region_stiffness"]
+    assert stiff.bounds[0] == -0.9
+    assert pipeline.saturated(stiff, np.array([-0.9, -0.9])) and pipeline.saturated(stiff, np.array([0.3, 200.0]))
+    assert pipeline.saturated(stiff, np.zeros(2)) and not pipeline.saturated(stiff, np.array([0.27, 3.8]))
+    assert not pipeline.saturated(BY_NAME["anisotropic_stretch"], np.array([1e4, 0.0]))
+    assert pipeline.saturated(BY_NAME["mass_damping"], np.zeros(1))
+    monkeypatch.setattr(type(stiff), "probes", lambda self, ctx, acceleration: [(0.02, None), (150.0, None)])
+    seen = []
+
+    def fake_best_form(cand, coefs, *args):
+        seen.append(coefs.tolist())
+        return Trial([cand.name], 0.004, 1.0, 0.009 if coefs[0] < 0 else 0.007, start="regression")
+
+    monkeypatch.setattr(pipeline, "_trial_in_best_form", fake_best_form)
+    best = pipeline._trial_from_starts(stiff, np.array([-0.9, -0.9]), None, SimpleNamespace(region=None), [], [],
+                                       None, None, 0.5, None)
+    assert seen == [[-0.9, -0.9], [0.02, 150.0]] and best.start == "probe" and best.train_l2 == 0.007
+    seen.clear()
+    pipeline._trial_from_starts(stiff, np.array([0.27, 3.8]), None, SimpleNamespace(region=None), [], [], None, None,
+                                0.5, None)
+    assert seen == [[0.27, 3.8]]
+
+
 def test_the_lag_start_is_for_registered_meshes_only():
     measured = SimpleNamespace(lag=np.array([0.004, 0.0, 0.0]))
     assert pipeline.measured_lag("registered", measured) is measured.lag
