@@ -582,9 +582,10 @@ def _trial_from_starts(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulato
                        train: list[Observed], heldout: list[Observed], attached: np.ndarray, config: FitConfig,
                        acceleration: float, lag: np.ndarray | None) -> Trial:
     """The trial of `cand` started from its regression coefficients `coefs`; where the regression put nothing or
-    the largest change a region candidate allows (saturated), also from its probe sizes; for a horizontal vector (a tilt, a wind) also along the baseline's rollout `lag`
-    (lag_start); keeping the start whose refit rolls the TRAINING sequences out best (the held-out error stays
-    unseen until the choice is made, as with the baseline's margin starts).
+    the largest change a region candidate allows (saturated), also from its probe sizes; for a horizontal vector
+    (a tilt, a wind) also along the baseline's rollout `lag` (lag_start); keeping the start whose refit rolls the
+    TRAINING sequences out best (the held-out error stays unseen until the choice is made, as with the baseline's
+    margin starts).
 
     Why: the refits minimise a loss a few frames ahead, where internal damping and drag look alike, so a refit
     started at zero drag stays there. Measured on the benchmark's hidden air damping (seed 1, noise 0): the
