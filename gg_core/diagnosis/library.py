@@ -89,11 +89,13 @@ class Context:
 class ModelChange:
     """How an effect enters the simulator: terms switched on (name -> parameters, replacing a term already there),
     the term parameters refitted as log-scales of those values, and region material fields as initial log-scales
-    ('density', 'stretch' = mu and lambda, 'bending', 'rest' = rest lengths) on the localized region."""
+    ('density', 'stretch' = mu and lambda, 'bending', 'rest' = rest lengths) on the localized region, with the
+    log-scale range the candidate declares for each (what a rollout search along them may reach)."""
 
     terms: dict[str, dict] = field(default_factory=dict)
     fit: tuple[str, ...] = ()
     region: dict[str, float] = field(default_factory=dict)
+    region_range: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def with_terms(terms: list[Term], extra: dict[str, dict]) -> list[Term]:
@@ -299,8 +301,11 @@ def _region_columns(keys: tuple[str, ...], h: float = 1e-4) -> Callable[[Context
     return columns
 
 
-def _region_model(keys: tuple[str, ...]) -> Callable[[np.ndarray, Context], ModelChange]:
-    return lambda c, ctx: ModelChange(region={k: float(np.log1p(max(v, -0.9))) for k, v in zip(keys, c)})
+def _region_model(keys: tuple[str, ...], bounds: tuple[float, float]
+                  ) -> Callable[[np.ndarray, Context], ModelChange]:
+    logs = (float(np.log1p(bounds[0])), float(np.log1p(bounds[1])))
+    return lambda c, ctx: ModelChange(region={k: float(np.log1p(max(v, -0.9))) for k, v in zip(keys, c)},
+                                      region_range={k: logs for k in keys})
 
 
 def _region_range(keys: tuple[str, ...], bounds: tuple[float, float]
@@ -326,7 +331,7 @@ def _region_candidate(name: str, equivalence: str, description: str, keys: tuple
                       coefficients: tuple[str, ...], bounds: tuple[float, float], **kwargs: object) -> Candidate:
     """Relative changes `coefficients` of the region fields `keys` (apply_region), kept within `bounds`."""
     return Candidate(name, equivalence, description, coefficients, "1", bounds, _region_columns(keys),
-                     _region_model(keys), needs_region=True, plausibility=_region_range(keys, bounds), **kwargs)
+                     _region_model(keys, bounds), needs_region=True, plausibility=_region_range(keys, bounds), **kwargs)
 
 
 CANDIDATES: tuple[Candidate, ...] = (

@@ -190,12 +190,16 @@ def test_a_zero_coefficient_is_only_refitted(monkeypatch):
     assert error == pytest.approx(rollout_error(sim, observed, pinned))
 
 
+def sim_region(sim: ImplicitSimulator) -> np.ndarray:
+    """The hanging sheet's free half (a region's per-vertex weights)."""
+    return (sim.cloth.template[:, 2] > 0.0).astype(np.float64)
+
+
 def _stiff_half(bending_log: float) -> tuple[ImplicitSimulator, CandidateParams]:
     """The hanging sheet (no tilt) with its free half's bending scaled by exp(bending_log), as a region candidate's
     trial holds it."""
     sim = _hanging(0.0)
-    region = (sim.cloth.template[:, 2] > 0.0).astype(np.float64)
-    params = CandidateParams(sim.cloth, sim, ("collision.margin",), region, {"bending": bending_log})
+    params = CandidateParams(sim.cloth, sim, ("collision.margin",), sim_region(sim), {"bending": bending_log})
     params.apply(sim.cloth)
     sim.refresh()
     return sim, params
@@ -225,11 +229,34 @@ def test_a_region_start_the_refit_spoils_is_kept_without_a_repeated_refit(monkey
     assert calls == [pytest.approx(np.log(30.0))] and label == "without refit"
     assert params.values()["region.bending_scale"] == pytest.approx(30.0)
     assert error == pytest.approx(rollout_error(sim, observed, pinned)) and error < 1e-9
-    # without a region scale the start is the baseline: only the refit
+    # without a region scale the start is the baseline: only the refit, its softer region scaled as close to the
+    # truth as a power of it gets (x0.1 ** 0.25)
     calls.clear()
     sim, params = _stiff_half(0.0)
     _, _, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
-    assert calls == [0.0] and label == "regression" and params.values()["region.bending_scale"] == pytest.approx(0.1)
+    assert calls == [0.0] and label.startswith("regression, rollout scale x0.25")
+    assert params.values()["region.bending_scale"] == pytest.approx(0.1 ** 0.25, rel=0.03)
+
+
+def test_a_region_the_refit_left_too_soft_is_scaled_on_training_rollouts_within_its_range():
+    """A refit that reached bending x3 on a region whose truth is x30: raised to the power that rolls the training
+    sequences out best, x30 where its range allows it, its range's end where not."""
+    truth, _ = _stiff_half(np.log(30.0))
+    rest = truth.cloth.template
+    observed = Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0)
+    pinned = truth.cloth.pinned
+    before = rollout_error(_stiff_half(np.log(3.0))[0], observed, pinned)
+    for top, expected, gain in ((200.0, 30.0, 0.1), (10.0, 11.0, 0.7)):
+        sim = _hanging(0.0)
+        params = CandidateParams(sim.cloth, sim, ("collision.margin",), sim_region(sim), {"bending": np.log(3.0)},
+                                 region_range={"bending": (np.log(0.1), np.log1p(top))})
+        params.apply(sim.cloth)
+        sim.refresh()
+        error, factor = rollout_scale(sim, params, 1, [observed], pinned, before)
+        assert params.values()["region.bending_scale"] == pytest.approx(expected, rel=0.1)
+        assert error == pytest.approx(rollout_error(sim, observed, pinned)) and error < gain * before
+        assert factor > 2.0 and params.values()["material.bending"] == pytest.approx(
+            float(_hanging(0.0).cloth.material.bending.mean()))   # only the region's scale moved
 
 
 def _split_fit(density: float, tilt: float = 2.0) -> dict[str, object]:
