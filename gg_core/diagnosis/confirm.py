@@ -14,7 +14,8 @@ rollout_choice): its stick-slip force is invisible a few frames ahead. Every oth
 coefficients (a region candidate's log-scales: its scales raised to a power) are then scaled by the factor that
 rolls the training sequences out best (rollout_scale): slow, quasi-static forces (a gravity tilt) and a region's
 bending barely show a few frames ahead either; and the candidate is also tried on the unrefitted baseline, scaled
-the same way, and refitted again from there where that rolls out better (refit_or_scale): a refit can spoil the material where the one-frame residual is mostly measurement error.
+the same way, and refitted again from there where that rolls out better (refit_or_scale): a refit can spoil the
+material where the one-frame residual is mostly measurement error.
 
 Vector coefficients (a wind's pressure, a gravity tilt) are refitted as one log-scale of the start's vector, so
 the refit keeps its direction; the direction comes from the regression or from the baseline's rollout lag
