@@ -190,16 +190,14 @@ def test_a_zero_coefficient_is_only_refitted(monkeypatch):
     assert error == pytest.approx(rollout_error(sim, observed, pinned))
 
 
-def sim_region(sim: ImplicitSimulator) -> np.ndarray:
-    """The hanging sheet's free half (a region's per-vertex weights)."""
-    return (sim.cloth.template[:, 2] > 0.0).astype(np.float64)
-
-
-def _stiff_half(bending_log: float) -> tuple[ImplicitSimulator, CandidateParams]:
+def _stiff_half(bending_log: float, region_range: dict[str, tuple[float, float]] | None = None
+                ) -> tuple[ImplicitSimulator, CandidateParams]:
     """The hanging sheet (no tilt) with its free half's bending scaled by exp(bending_log), as a region candidate's
-    trial holds it."""
+    trial holds it (within `region_range`, where given)."""
     sim = _hanging(0.0)
-    params = CandidateParams(sim.cloth, sim, ("collision.margin",), sim_region(sim), {"bending": bending_log})
+    region = (sim.cloth.template[:, 2] > 0.0).astype(np.float64)
+    params = CandidateParams(sim.cloth, sim, ("collision.margin",), region, {"bending": bending_log},
+                             region_range=region_range)
     params.apply(sim.cloth)
     sim.refresh()
     return sim, params
@@ -245,13 +243,9 @@ def test_a_region_the_refit_left_too_soft_is_scaled_on_training_rollouts_within_
     rest = truth.cloth.template
     observed = Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0)
     pinned = truth.cloth.pinned
-    before = rollout_error(_stiff_half(np.log(3.0))[0], observed, pinned)
     for top, expected, gain in ((200.0, 30.0, 0.1), (10.0, 11.0, 0.7)):
-        sim = _hanging(0.0)
-        params = CandidateParams(sim.cloth, sim, ("collision.margin",), sim_region(sim), {"bending": np.log(3.0)},
-                                 region_range={"bending": (np.log(0.1), np.log1p(top))})
-        params.apply(sim.cloth)
-        sim.refresh()
+        sim, params = _stiff_half(np.log(3.0), {"bending": (np.log(0.1), np.log1p(top))})
+        before = rollout_error(sim, observed, pinned)
         error, factor = rollout_scale(sim, params, 1, [observed], pinned, before)
         assert params.values()["region.bending_scale"] == pytest.approx(expected, rel=0.1)
         assert error == pytest.approx(rollout_error(sim, observed, pinned)) and error < gain * before
