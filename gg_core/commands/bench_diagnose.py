@@ -159,11 +159,7 @@ def parameter_errors(truth: dict[str, object], values: dict[str, object] | None)
     """Relative error of every comparable parameter (vector norm for vectors; for scale factors, of the change
     from 1); empty where nothing was refitted."""
     out: dict[str, float] = {}
-    values = dict(values or {})
-    if "gravity_offset.delta_g" in values:
-        values["gravity.tilt"] = offset_tilt(values["gravity_offset.delta_g"])
-    if (push := wind_push(values)) is not None:
-        values["wind.push"] = push
+    values = scored_values(values or {})
     for key, true in truth.items():
         if key not in values:
             continue
@@ -172,6 +168,42 @@ def parameter_errors(truth: dict[str, object], values: dict[str, object] | None)
         if key.startswith("region."):
             ours, true_v = ours - 1.0, true_v - 1.0
         out[key] = float(np.linalg.norm(ours - true_v) / max(np.linalg.norm(true_v), 1e-12))
+    return out
+
+
+def scored_values(values: dict[str, object]) -> dict[str, object]:
+    """Refitted `values` with what the truth is scored in added: the gravity offset's tilt, the wind's push."""
+    out = dict(values)
+    if "gravity_offset.delta_g" in out:
+        out["gravity.tilt"] = offset_tilt(out["gravity_offset.delta_g"])
+    if (push := wind_push(out)) is not None:
+        out["wind.push"] = push
+    return out
+
+
+def identified_truth(truth: dict[str, object], values: dict[str, object] | None, ranges: dict[str, dict] | None
+                     ) -> dict[str, bool]:
+    """For each comparable true parameter: whether it lies in the range the recordings leave open around the
+    delivered value (identify.profiles' range_factors on the parameter it is scored from; an open end at the
+    profile's last factor: beyond it the recordings were not probed; norms of vectors, whose direction the
+    profiles do not vary). Empty without a final fit."""
+    if not values or not ranges:
+        return {}
+    delivered = scored_values(values)
+    out: dict[str, bool] = {}
+    for name, profile in ranges.items():
+        low, high = profile["range_factors"]
+
+        def scored_at(factor: float) -> dict[str, object]:
+            return scored_values({**values, name: (np.asarray(values[name], np.float64) * factor).tolist()})
+
+        moved = scored_at(2.0)
+        for key, true in truth.items():
+            if key not in delivered or np.allclose(moved[key], delivered[key]):
+                continue        # not scored from this parameter
+            ends = [np.linalg.norm(scored_at(f if f is not None else grid_end)[key])
+                    for f, grid_end in ((low, profile["factors"][0]), (high, profile["factors"][-1]))]
+            out[key] = bool(min(ends) <= np.linalg.norm(np.asarray(true, np.float64)) <= max(ends))
     return out
 
 
@@ -292,6 +324,8 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         "parameter_error_all_recordings": parameter_error(true_params, named_final),   # pipeline.final_fit
         "parameter_errors_all_recordings": parameter_errors(true_params, named_final),
         "true_effect_parameter_error": parameter_error(true_params, None if ref is None else ref["refit"]),
+        "truth_in_identified_range": identified_truth(true_params, named_final,
+                                                      (report.get("final_fit") or {}).get("identified_ranges")),
         "region_overlap": region_overlap(report, accepted["name"] if accepted and BY_NAME[accepted["name"]].needs_region
                                          else None, np.load(region_path) if region_path else None),
         "signal_mm": signal * 1e3, "step_change_mm": step_change * 1e3,
@@ -328,6 +362,7 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
                if c.get("cross_validated_true_effect_gain") is not None]
     closed_to_truth = [c["true_model_gap_closed"] for c in present if c.get("true_model_gap_closed") is not None]
     overruled = [c for c in cases if c["rollouts_first"]]
+    identified = [all(c["truth_in_identified_range"].values()) for c in present if c.get("truth_in_identified_range")]
 
     def mean(xs: list[float]) -> float | None:
         return float(np.mean(xs)) if xs else None
@@ -349,6 +384,7 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
             "false_alarm_rate_none": mean([float(not c["correct"]) for c in none]),
             "median_parameter_error": float(np.median(errors)) if errors else None,
             "median_parameter_error_all_recordings": float(np.median(final_errors)) if final_errors else None,
+            "truth_in_identified_range": mean([float(x) for x in identified]),
             "mean_heldout_gain_when_named": mean(gains),
             "mean_cross_validated_gain_when_named": mean(cv_gains),
             "median_gap_closed": float(np.median(closed)) if closed else None,

@@ -105,6 +105,7 @@ class Trial:
     form: str = ""              # the candidate's Form (library.py) the trial refitted; "" its own model
     start_coefs: np.ndarray | None = None   # a single candidate's coefficients at that start (final_fit reuses them)
     compared: dict[str, float] = field(default_factory=dict)   # final fit: each earlier fit's rollout error (best_fit)
+    identified: dict[str, dict] = field(default_factory=dict)  # final fit: its effect parameters' profiles (identify)
 
 
 def merge(changes: list[ModelChange]) -> ModelChange:
@@ -144,8 +145,9 @@ def trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple
 def fitted_trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: list[tuple[Candidate, np.ndarray]],
                  ctx: Context, region: np.ndarray | None, train: list[Observed], heldout: list[Observed],
                  pinned: np.ndarray, config: FitConfig, warm: list[tuple[str, dict[str, object]]] | None = None
-                 ) -> tuple[Trial, ImplicitSimulator]:
-    """trial, and the refitted simulator itself (what the diagnosis delivers of its final fit). `warm`: labelled
+                 ) -> tuple[Trial, ImplicitSimulator, CandidateParams]:
+    """trial, and the refitted simulator itself (what the diagnosis delivers of its final fit) with its
+    parameters. `warm`: labelled
     values (Trial.values) of earlier trials of the same candidates to start from instead of the candidates'
     coefficients on the baseline: the one that rolls `train` out best (best_fit), refitted where that helps
     (refit_or_keep)."""
@@ -168,7 +170,7 @@ def fitted_trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: lis
                 train_error, start_label = rollout_choice(sim, chosen[0][0], ctx, train, pinned, train_error)
     error = mean_rollout_error(sim, heldout, pinned) if heldout else float("nan")
     return Trial([c.name for c, _ in chosen], error, loss, train_error, params.values(), time.perf_counter() - start,
-                 start_label, start_coefs=chosen[0][1] if len(chosen) == 1 else None, compared=compared), sim
+                 start_label, start_coefs=chosen[0][1] if len(chosen) == 1 else None, compared=compared), sim, params
 
 
 def _at_start(base: ImplicitSimulator, base_fit: tuple[str, ...], change: ModelChange, region: np.ndarray | None,

@@ -113,7 +113,25 @@ def sentence(effect: dict, before: float) -> str:
             f"{' (refitted on the training recordings alone)' if everything else ''}, the held-out rollout error "
             f"goes from "
             f"{before * 1e3:.1f} mm to {effect['heldout_l2'] * 1e3:.1f} mm ({effect['heldout_gain']:+.0%} gain)"
-            + cross_validated_phrase(effect) + residual_choice_phrase(effect) + unresolved_phrase(effect) + ".")
+            + cross_validated_phrase(effect) + residual_choice_phrase(effect) + unresolved_phrase(effect) + "."
+            + identified_phrase(effect))
+
+
+def identified_phrase(effect: dict) -> str:
+    """How precisely every recording's rollouts fix each delivered effect parameter (identify.profiles): the
+    multiples of its value that roll out within the tolerance, open where that reaches the profile's end."""
+    ranges = (effect.get("uncertainty") or {}).get("delivered_ranges")
+    if not ranges:
+        return ""
+    parts = []
+    for name, r in ranges.items():
+        (low, high), (first, last) = r["factors"], r["grid"]
+        span = (f"x{low:.2g}" if low is not None else f"below x{first:.2g}",
+                f"x{high:.2g}" if high is not None else f"beyond x{last:.2g}")
+        parts.append(f"{name} {span[0]} to {span[1]}" + (" (not identified)" if low is None and high is None else ""))
+    tolerance = next(iter(ranges.values()))["tolerance"]
+    return (f" Multiples of the delivered values whose rollouts of every recording lose less than {tolerance:.0%} of "
+            f"the error without the effect: " + "; ".join(parts) + ".")
 
 
 def unresolved_phrase(effect: dict) -> str:

@@ -17,7 +17,8 @@ from diagnosis_helpers import write_blender_layout_capture, write_sim_capture  #
 
 from gg_core.cli import main  # noqa: E402
 from gg_core.commands.bench_diagnose import (BLENDER_DEFAULT_STEPS, CLOTH_STEPS, capture_of,  # noqa: E402
-                                             case_name, confusion, effect_params, fold_gains, parameter_error,
+                                             case_name, confusion, effect_params, fold_gains, identified_truth,
+                                             parameter_error,
                                              parameter_errors, region_overlap, summarize, true_model_l2,
                                              truth_parameters)
 from gg_core.diagnosis.blender_units import WIND_COEF  # noqa: E402
@@ -149,6 +150,33 @@ def test_bench_scoring():
     assert table[0].split()[-3:] == ["gravity", "none", "wind"]
     assert [int(v) for v in table[-1].split()[1:]] == [1, 0, 0]      # wind named gravity
     assert np.isfinite(summary["mean_heldout_gain_when_named"])
+
+
+def test_a_true_parameter_is_checked_against_the_range_the_recordings_leave_open():
+    """bench: identified_truth on pipeline.final_fit's profiles (identify.py), through the same conversions as the
+    parameter errors; an open end counts only to the profile's last factor."""
+    grid = [0.25, 0.5, 1.0, 2.0, 4.0]
+    patch = truth_parameters({"effect": {"name": "stiff_patch", "params": {"factor": 30.0}}})
+    delivered = {"material.bending": 1e-4, "region.stretch_scale": 0.28, "region.bending_scale": 17.4}
+    ranges = {"region.stretch_scale": {"range_factors": [None, None], "factors": grid},
+              "region.bending_scale": {"range_factors": [0.8, None], "factors": grid}}
+    assert identified_truth(patch, delivered, ranges) == {"region.stretch_scale": False,   # 30 > 4 x 0.28
+                                                          "region.bending_scale": True}    # 17.4 x 0.8 .. x 4
+    ranges["region.bending_scale"]["range_factors"] = [0.8, 1.5]
+    assert identified_truth(patch, delivered, ranges)["region.bending_scale"] is False     # above 17.4 x 1.5
+    tilt = {"gravity.tilt": [0.2, 0.0]}
+    offset = {"gravity_offset.delta_g": [9.81 * 0.16, 0.0, 0.0]}                             # a tilt of 0.16
+    assert identified_truth(tilt, offset, {"gravity_offset.delta_g": {"range_factors": [0.9, 1.3],
+                                                                      "factors": grid}}) == {"gravity.tilt": True}
+    assert identified_truth(tilt, offset, {"gravity_offset.delta_g": {"range_factors": [0.9, 1.2],
+                                                                      "factors": grid}}) == {"gravity.tilt": False}
+    assert identified_truth(tilt, None, {}) == {}
+    cases = [{"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
+              "gap_closed": None, "parameter_error": 0.1, "heldout_l2_before": 0.01, "true_effect_l2": None,
+              "cross_validated_gain": None, "resolved_by_reference": True, "rollouts_first": None,
+              "truth_in_identified_range": truth}
+             for truth in ({"gravity.tilt": True}, {"region.bending_scale": True, "region.stretch_scale": False}, {})]
+    assert summarize(cases, min_gain=0.1)["truth_in_identified_range"] == 0.5   # every parameter must hold
 
 
 def test_fold_gains_give_the_named_and_the_true_effect_per_held_out_recording():

@@ -13,11 +13,12 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
 
 from physics_helpers import sheet, uv_sphere  # noqa: E402
 
-from gg_core.diagnosis.confirm import Trial  # noqa: E402
+from gg_core.diagnosis.confirm import CandidateParams, Trial  # noqa: E402
 from gg_core.diagnosis.folds import Fold  # noqa: E402
 from gg_core.geometry.meshio import write_obj, write_ply  # noqa: E402
 from gg_core.physics.cloth import Cloth  # noqa: E402
-from gg_core.physics.forces import make_terms  # noqa: E402
+from gg_core.physics.fitting import Observed  # noqa: E402
+from gg_core.physics.forces import DEFAULT_TERMS, make_terms  # noqa: E402
 from gg_core.physics.material import Material  # noqa: E402
 from gg_core.physics.simulator import ClothState, ImplicitSimulator  # noqa: E402
 from gg_core.storage import write_json  # noqa: E402
@@ -86,3 +87,32 @@ def fold(held: str, ref: tuple[float, float], **trials: tuple[float, float]) -> 
     """A fold judged against (held-out, training) rollout errors `ref`, with trials name=(held-out, training)."""
     return Fold(["a", "b"], [held], Trial([], ref[0], 1.0, ref[1]),
                 {n: Trial([n], h, 1.0, t) for n, (h, t) in trials.items()})
+
+
+def hanging(tilt: float) -> ImplicitSimulator:
+    """A sheet pinned along one edge, falling under gravity tilted sideways by `tilt` m/s^2."""
+    v, f = sheet(6, 6, 0.3, 0.3)
+    pinned = np.abs(v[:, 2] + 0.15) < 1e-9
+    terms = make_terms([*DEFAULT_TERMS, "gravity_offset"], {"gravity_offset": {"delta_g": (tilt, 0.0, 0.0)}})
+    return ImplicitSimulator(Cloth(v, f, pinned=pinned), terms=terms)
+
+
+def stiff_half(bending_log: float, region_range: dict[str, tuple[float, float]] | None = None
+               ) -> tuple[ImplicitSimulator, CandidateParams]:
+    """The hanging sheet (no tilt) with its free half's bending scaled by exp(bending_log), as a region candidate's
+    trial holds it (within `region_range`, where given)."""
+    sim = hanging(0.0)
+    region = (sim.cloth.template[:, 2] > 0.0).astype(np.float64)
+    params = CandidateParams(sim.cloth, sim, ("collision.margin",), region, {"bending": bending_log},
+                             region_range=region_range)
+    params.apply(sim.cloth)
+    sim.refresh()
+    return sim, params
+
+
+def tilted_fall() -> tuple[Observed, np.ndarray]:
+    """12 frames of the hanging sheet falling under a 2 m/s^2 tilt, and its pinned vertices."""
+    truth = hanging(2.0)
+    rest = truth.cloth.template
+    return (Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0),
+            truth.cloth.pinned)

@@ -17,6 +17,7 @@ from gg_core.physics.forces import DEFAULT_TERMS, make_terms
 from gg_core.physics.material import MATERIAL_NAMES, Material, to_latent
 from gg_core.physics.simulator import ClothState, ImplicitSimulator
 
+from diagnosis_helpers import hanging, stiff_half, tilted_fall
 from physics_helpers import sheet, uv_sphere
 
 
@@ -55,14 +56,6 @@ def test_friction_is_chosen_on_training_rollouts():
     assert float(next(t for t in truth.terms if t.name == "body_friction").params["mu"]) == 1.5
 
 
-def _hanging(tilt: float) -> ImplicitSimulator:
-    """A sheet pinned along one edge, falling under gravity tilted sideways by `tilt` m/s^2."""
-    v, f = sheet(6, 6, 0.3, 0.3)
-    pinned = np.abs(v[:, 2] + 0.15) < 1e-9
-    terms = make_terms([*DEFAULT_TERMS, "gravity_offset"], {"gravity_offset": {"delta_g": (tilt, 0.0, 0.0)}})
-    return ImplicitSimulator(Cloth(v, f, pinned=pinned), terms=terms)
-
-
 def test_golden_section_finds_the_minimum_of_a_unimodal_function():
     calls = []
 
@@ -77,12 +70,12 @@ def test_golden_section_finds_the_minimum_of_a_unimodal_function():
 
 
 def test_a_tilt_the_refit_underestimates_is_scaled_on_training_rollouts():
-    truth = _hanging(2.0)
+    truth = hanging(2.0)
     rest = truth.cloth.template
     observed = Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12),
                         None, 30.0)
     pinned = truth.cloth.pinned
-    sim = _hanging(0.5)
+    sim = hanging(0.5)
     params = CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {})
     before = rollout_error(sim, observed, pinned)
     error, factor = rollout_scale(sim, params, 1, [observed], pinned, before)
@@ -120,16 +113,9 @@ def _refit_to(monkeypatch: pytest.MonkeyPatch, densities: list[float]) -> list[f
     return starts
 
 
-def _tilted_fall() -> tuple[Observed, np.ndarray]:
-    truth = _hanging(2.0)
-    rest = truth.cloth.template
-    return (Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0),
-            truth.cloth.pinned)
-
-
 def _start(density: float) -> tuple[ImplicitSimulator, CandidateParams]:
     """The tilt's trial from a quarter of the truth's 2 m/s^2 on a garment of the given density."""
-    sim = _hanging(0.5)
+    sim = hanging(0.5)
     sim.cloth.material = Material.uniform(sim.cloth.n_vertices, density=density)
     params = CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {})
     params.apply(sim.cloth)
@@ -138,8 +124,8 @@ def _start(density: float) -> tuple[ImplicitSimulator, CandidateParams]:
 
 
 def test_a_refit_that_spoils_the_rollouts_loses_to_the_unrefitted_start_and_is_restarted_from_it(monkeypatch):
-    observed, pinned = _tilted_fall()
-    true_density = float(_hanging(2.0).cloth.material.density[0])
+    observed, pinned = tilted_fall()
+    true_density = float(hanging(2.0).cloth.material.density[0])
     # the refit from the regression's start moves the density 4x off; restarted from the scaled start, to the truth
     starts = _refit_to(monkeypatch, [4.0 * true_density, true_density])
     sim, params = _start(1.3 * true_density)
@@ -154,8 +140,8 @@ def test_a_refit_that_spoils_the_rollouts_loses_to_the_unrefitted_start_and_is_r
 
 
 def test_the_unrefitted_start_is_kept_where_every_refit_spoils_the_rollouts(monkeypatch):
-    observed, pinned = _tilted_fall()
-    true_density = float(_hanging(2.0).cloth.material.density[0])
+    observed, pinned = tilted_fall()
+    true_density = float(hanging(2.0).cloth.material.density[0])
     starts = _refit_to(monkeypatch, [4.0 * true_density, 4.0 * true_density])
     sim, params = _start(true_density)
     loss, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
@@ -167,8 +153,8 @@ def test_the_unrefitted_start_is_kept_where_every_refit_spoils_the_rollouts(monk
 
 
 def test_a_refit_that_rolls_out_as_well_is_kept_without_a_restart(monkeypatch):
-    observed, pinned = _tilted_fall()
-    true_density = float(_hanging(2.0).cloth.material.density[0])
+    observed, pinned = tilted_fall()
+    true_density = float(hanging(2.0).cloth.material.density[0])
     starts = _refit_to(monkeypatch, [true_density])
     sim, params = _start(3.0 * true_density)
     _, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
@@ -179,10 +165,10 @@ def test_a_refit_that_rolls_out_as_well_is_kept_without_a_restart(monkeypatch):
 
 def test_a_zero_coefficient_is_only_refitted(monkeypatch):
     """Without a coefficient the unrefitted start is the baseline itself: nothing to scale, no restart."""
-    observed, pinned = _tilted_fall()
-    true_density = float(_hanging(2.0).cloth.material.density[0])
+    observed, pinned = tilted_fall()
+    true_density = float(hanging(2.0).cloth.material.density[0])
     starts = _refit_to(monkeypatch, [4.0 * true_density])
-    sim = _hanging(0.0)
+    sim = hanging(0.0)
     params = CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {})
     loss, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
     assert starts == [0.0] and label == "regression" and loss == 1.0
@@ -190,23 +176,10 @@ def test_a_zero_coefficient_is_only_refitted(monkeypatch):
     assert error == pytest.approx(rollout_error(sim, observed, pinned))
 
 
-def _stiff_half(bending_log: float, region_range: dict[str, tuple[float, float]] | None = None
-                ) -> tuple[ImplicitSimulator, CandidateParams]:
-    """The hanging sheet (no tilt) with its free half's bending scaled by exp(bending_log), as a region candidate's
-    trial holds it (within `region_range`, where given)."""
-    sim = _hanging(0.0)
-    region = (sim.cloth.template[:, 2] > 0.0).astype(np.float64)
-    params = CandidateParams(sim.cloth, sim, ("collision.margin",), region, {"bending": bending_log},
-                             region_range=region_range)
-    params.apply(sim.cloth)
-    sim.refresh()
-    return sim, params
-
-
 def test_a_region_start_the_refit_spoils_is_kept_without_a_repeated_refit(monkeypatch):
     """A region candidate's start (its regression scales) is the unrefitted option too; with nothing to scale,
     the refit is not repeated from it."""
-    truth, _ = _stiff_half(np.log(30.0))
+    truth, _ = stiff_half(np.log(30.0))
     rest = truth.cloth.template
     observed = Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0)
     pinned = truth.cloth.pinned
@@ -222,7 +195,7 @@ def test_a_region_start_the_refit_spoils_is_kept_without_a_repeated_refit(monkey
         return float(len(calls))
 
     monkeypatch.setattr(confirm, "refit", spoiling_refit)
-    sim, params = _stiff_half(np.log(30.0))
+    sim, params = stiff_half(np.log(30.0))
     loss, error, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
     assert calls == [pytest.approx(np.log(30.0))] and label == "without refit"
     assert params.values()["region.bending_scale"] == pytest.approx(30.0)
@@ -230,7 +203,7 @@ def test_a_region_start_the_refit_spoils_is_kept_without_a_repeated_refit(monkey
     # without a region scale the start is the baseline: only the refit, its softer region scaled as close to the
     # truth as a power of it gets (x0.1 ** 0.25)
     calls.clear()
-    sim, params = _stiff_half(0.0)
+    sim, params = stiff_half(0.0)
     _, _, label = refit_or_scale(sim, params, 1, [observed], pinned, FitConfig())
     assert calls == [0.0] and label.startswith("regression, rollout scale x0.25")
     assert params.values()["region.bending_scale"] == pytest.approx(0.1 ** 0.25, rel=0.03)
@@ -239,23 +212,23 @@ def test_a_region_start_the_refit_spoils_is_kept_without_a_repeated_refit(monkey
 def test_a_region_the_refit_left_too_soft_is_scaled_on_training_rollouts_within_its_range():
     """A refit that reached bending x3 on a region whose truth is x30: raised to the power that rolls the training
     sequences out best, x30 where its range allows it, its range's end where not."""
-    truth, _ = _stiff_half(np.log(30.0))
+    truth, _ = stiff_half(np.log(30.0))
     rest = truth.cloth.template
     observed = Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0)
     pinned = truth.cloth.pinned
     for top, expected, gain in ((200.0, 30.0, 0.1), (10.0, 11.0, 0.7)):
-        sim, params = _stiff_half(np.log(3.0), {"bending": (np.log(0.1), np.log1p(top))})
+        sim, params = stiff_half(np.log(3.0), {"bending": (np.log(0.1), np.log1p(top))})
         before = rollout_error(sim, observed, pinned)
         error, factor = rollout_scale(sim, params, 1, [observed], pinned, before)
         assert params.values()["region.bending_scale"] == pytest.approx(expected, rel=0.1)
         assert error == pytest.approx(rollout_error(sim, observed, pinned)) and error < gain * before
         assert factor > 2.0 and params.values()["material.bending"] == pytest.approx(
-            float(_hanging(0.0).cloth.material.bending.mean()))   # only the region's scale moved
+            float(hanging(0.0).cloth.material.bending.mean()))   # only the region's scale moved
 
 
 def _split_fit(density: float, tilt: float = 2.0) -> dict[str, object]:
     """Trial.values of a tilt trial that found `tilt` m/s^2 (the truth's 2) on a garment of the given density."""
-    sim = _hanging(tilt)
+    sim = hanging(tilt)
     sim.cloth.material = Material.uniform(sim.cloth.n_vertices, density=density)
     return CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {}).values()
 
@@ -265,7 +238,7 @@ def _final_fit(*warm: dict[str, object]):
     `warm` (the split's first)."""
     v, f = sheet(6, 6, 0.3, 0.3)
     base = ImplicitSimulator(Cloth(v, f, pinned=np.abs(v[:, 2] + 0.15) < 1e-9), terms=make_terms(DEFAULT_TERMS))
-    observed, pinned = _tilted_fall()
+    observed, pinned = tilted_fall()
     return fitted_trial(base, ("collision.margin",), [(BY_NAME["gravity_offset"], np.array([0.5, 0.0]))], None,
                         None, [observed], [], pinned, FitConfig(),
                         [(f"fit {i}", values) for i, values in enumerate(warm)])
@@ -274,30 +247,32 @@ def _final_fit(*warm: dict[str, object]):
 def test_a_warm_start_keeps_the_split_fit_where_its_refit_rolls_out_worse(monkeypatch):
     """pipeline.final_fit starts from the split's fitted values (at_values), not the candidate's start: a refit
     that spoils the material loses to them."""
-    true_density = float(_hanging(2.0).cloth.material.density[0])
+    true_density = float(hanging(2.0).cloth.material.density[0])
     starts = _refit_to(monkeypatch, [4.0 * true_density])
-    trial, sim = _final_fit(_split_fit(true_density))
+    trial, sim, params = _final_fit(_split_fit(true_density))
     assert starts == [pytest.approx(2.0)]                       # the refit started at the split's tilt, not at 0.5
     assert trial.start == "fit 0" and trial.values["gravity_offset.delta_g"] == [2.0, 0.0, 0.0]
     assert float(sim.cloth.material.density[0]) == pytest.approx(true_density)
     assert trial.train_l2 < 1e-6 and trial.train_loss == 1.0      # evaluated without an iteration at the kept fit
+    assert params.values() == trial.values                      # the delivered parameters (identify profiles them)
 
 
 def test_a_warm_start_keeps_the_refit_where_it_rolls_out_better(monkeypatch):
-    true_density = float(_hanging(2.0).cloth.material.density[0])
+    true_density = float(hanging(2.0).cloth.material.density[0])
     _refit_to(monkeypatch, [true_density])
-    trial, sim = _final_fit(_split_fit(1.5 * true_density))
+    trial, sim, params = _final_fit(_split_fit(1.5 * true_density))
     assert trial.start == "fit 0, refitted"
     assert trial.values["material.density"] == pytest.approx(true_density)
     assert float(sim.cloth.material.density[0]) == pytest.approx(true_density) and trial.train_l2 < 1e-6
+    assert params.values() == trial.values
 
 
 def test_the_final_fit_starts_from_the_earlier_fit_that_rolls_out_best(monkeypatch):
     """pipeline.final_fit also starts from the other folds' fits (confirm.best_fit): where the split's tilt is half
     the truth's and a fold found it, the fold's fit is delivered, and the refit that spoils the material is not."""
-    true_density = float(_hanging(2.0).cloth.material.density[0])
+    true_density = float(hanging(2.0).cloth.material.density[0])
     starts = _refit_to(monkeypatch, [4.0 * true_density])
-    trial, sim = _final_fit(_split_fit(true_density, 1.0), _split_fit(true_density, 3.0),
+    trial, sim, _ = _final_fit(_split_fit(true_density, 1.0), _split_fit(true_density, 3.0),
                             _split_fit(true_density))
     assert trial.start == "fit 2" and starts == [pytest.approx(2.0)]   # refitted once, from the best fit only
     assert trial.values["gravity_offset.delta_g"] == [2.0, 0.0, 0.0] and trial.train_l2 < 1e-6
@@ -307,7 +282,7 @@ def test_the_final_fit_starts_from_the_earlier_fit_that_rolls_out_best(monkeypat
 
 
 def test_at_values_sets_the_material_the_terms_and_the_region_scales():
-    sim = _hanging(0.5)
+    sim = hanging(0.5)
     values = {**_split_fit(0.3), "region.stretch_scale": 0.5, "region.bending_scale": 4.0}
     logs = at_values(sim.cloth, sim, {"stretch": 0.0, "bending": 0.0}, values)
     assert logs == {"stretch": pytest.approx(np.log(0.5)), "bending": pytest.approx(np.log(4.0))}

@@ -11,6 +11,7 @@ from diagnosis_helpers import fold
 from gg_core.diagnosis import pipeline
 from gg_core.diagnosis.confirm import Trial
 from gg_core.diagnosis.folds import CrossValidation, Fold
+from gg_core.diagnosis.identify import Profile
 from gg_core.diagnosis.library import BY_NAME, CANDIDATES, MOVING_AIR
 from gg_core.diagnosis.pipeline import (confirmed, implausible, judge_reference, named_first, propose, selected,
                                        unresolved, usable_candidates)
@@ -339,10 +340,18 @@ def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_fits(
 
     def fake_trial(base, base_fit, chosen, ctx, region, train, heldout, pinned, config, warm):
         calls.append((chosen, region, [o.name for o in train], heldout, warm))
-        return Trial([c.name for c, _ in chosen], float("nan"), 1.0, 0.003), "the refitted simulator"
+        return Trial([c.name for c, _ in chosen], float("nan"), 1.0, 0.003), "the refitted simulator", "its params"
+
+    def fake_profiles(sim, params, first, recordings, pinned, baseline_l2):
+        calls.append((sim, params, first, [o.name for o in recordings], baseline_l2))
+        return [Profile("wind.velocity", [0.5, 1.0, 2.0], [0.004, 0.003, 0.0032], [], baseline_l2)]
 
     monkeypatch.setattr(pipeline, "fitted_trial", fake_trial)
+    monkeypatch.setattr(pipeline, "profiles", fake_profiles)
+    monkeypatch.setattr(pipeline, "mean_rollout_error", lambda sim, recordings, pinned: 0.005)   # the baseline's
     recordings = [Observed(n, np.zeros((3, 2, 3)), None, 30.0) for n in ("a", "b", "c")]
     final, simulator = pipeline.final_fit(None, chosen, ctx, fits, recordings, None, None)
-    assert calls == [(chosen, ctx.region, ["a", "b", "c"], [], fits)] and final.train_l2 == 0.003
-    assert simulator == "the refitted simulator"                 # what stages.diagnose writes as model.npz
+    assert calls == [(chosen, ctx.region, ["a", "b", "c"], [], fits),
+                     ("the refitted simulator", "its params", len(pipeline.BASELINE_FIT), ["a", "b", "c"], 0.005)]
+    assert final.train_l2 == 0.003 and simulator == "the refitted simulator"   # what stages.diagnose writes
+    assert final.identified["wind.velocity"]["range_factors"] == [pytest.approx(0.5 ** 0.25), None]

@@ -78,6 +78,19 @@ def test_sentence_and_page(tmp_path):
     assert Image.open(io.BytesIO(base64.b64decode(images[0]))).size == (300, 400)
 
 
+def test_the_sentence_says_how_precisely_the_recordings_fix_each_delivered_value():
+    """pipeline.final_fit's profiles (identify.py): a closed range, one open on one side, one not identified."""
+    ranges = {"region.bending_scale": {"factors": [0.74, None], "grid": [0.25, 4.0], "tolerance": 0.05},
+              "region.stretch_scale": {"factors": [None, None], "grid": [0.25, 4.0], "tolerance": 0.05},
+              "mass_damping.alpha": {"factors": [0.91, 1.12], "grid": [0.25, 4.0], "tolerance": 0.05}}
+    text = sentence({**EFFECT, "uncertainty": {**EFFECT["uncertainty"], "delivered_ranges": ranges}}, 0.012)
+    assert text.endswith(" Multiples of the delivered values whose rollouts of every recording lose less than 5% of "
+                         "the error without the effect: region.bending_scale x0.74 to beyond x4; "
+                         "region.stretch_scale below x0.25 to beyond x4 (not identified); "
+                         "mass_damping.alpha x0.91 to x1.1.")
+    assert sentence(EFFECT, 0.012).endswith("(+50% gain).")                # no final fit: nothing said
+
+
 def testregion_sentence_says_where_each_region_candidate_acted():
     scanned = {"rest_length_region": {"region_vertices": [1, 2, 3], "patches": [4, 7], "explained": 0.123,
                                       "best_patch_explained": 0.1},
