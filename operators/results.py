@@ -293,7 +293,8 @@ def summary(report: dict) -> str:
     accepted: the joint refit is what was confirmed), the form it was refitted in where the candidate has several
     (library.Form), and the candidate it was chosen over where the rollouts tied
     (folds.CrossValidation.residual_tie_break) or, where nothing chose, the rivals it was not told from
-    (pipeline.unresolved)."""
+    (pipeline.unresolved), and the delivered values the recordings do not fix at all (identify.profiles: every
+    multiple profiled rolls out about as well), which a user should not read as measured."""
     if report.get("verdict") != "missing":
         return "Nothing missing: the simulator explains the recordings"
     accepted = report.get("accepted", [])
@@ -307,12 +308,15 @@ def summary(report: dict) -> str:
         rivals = effect.get("not_separated_from") or []
         over = f"; chosen over {effect['residual_chose_over']} by the residual" if effect.get("residual_chose_over") \
             else (f"; {' or '.join(rivals)} fits as well" if rivals else "")
+        loose = [k for k, r in ((effect.get("uncertainty") or {}).get("delivered_ranges") or {}).items()
+                 if r["factors"] == [None, None]]
+        over += f"; not fixed by the recordings: {', '.join(loose)}" if loose else ""
         label = f"{name} as {effect['form']}" if effect.get("form") else name
         if cv.get("complete"):
             return f"{label} (held-out error {-cv['heldout_gain']:+.0%}, mean of {cv['folds']} folds{over})"
         if effect.get("heldout_gain") is None:
             return label
-        return f"{label} (held-out error {-effect['heldout_gain']:+.0%})"
+        return f"{label} (held-out error {-effect['heldout_gain']:+.0%}{over})"
 
     return "Missing physics: " + ", ".join(gain(name) for name in accepted)
 

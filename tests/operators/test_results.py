@@ -144,6 +144,14 @@ def test_residual_map_colours_the_garment_and_states_the_verdict(blender, tmp_pa
     assert blender.ops.gg.show_residuals() == {"FINISHED"}
     assert blender.context.scene.gg.diagnosis == ("Missing physics: mass_damping (held-out error -21%, mean of 3 "
                                                   "folds; gravity_offset fits as well)")
+    report["effects"][0]["uncertainty"] = {"delivered_ranges": {                    # pipeline.final_fit's profiles
+        "mass_damping.alpha": {"factors": [0.8, 1.3]}, "wind.velocity": {"factors": [None, None]}}}
+    _write_diagnosis(tmp_path / "loose", report, np.array([0.0, 1.0, 2.0, 4.0]))
+    blender.context.scene.gg.project_path = str(tmp_path / "loose")
+    assert blender.ops.gg.show_residuals() == {"FINISHED"}
+    assert blender.context.scene.gg.diagnosis == ("Missing physics: mass_damping (held-out error -21%, mean of 3 "
+                                                  "folds; gravity_offset fits as well; not fixed by the recordings: "
+                                                  "wind.velocity)")
     report["effects"] = [{"name": "wind", "form": "moving air", "heldout_gain": 0.35}]    # refitted in another form
     report["accepted"] = ["wind"]
     _write_diagnosis(tmp_path / "form", report, np.array([0.0, 1.0, 2.0, 4.0]))
