@@ -428,6 +428,10 @@ def run(args: argparse.Namespace) -> int:
                              f" ({-case['cross_validated_true_effect_gain']:+.0%} over the folds)")
                           + ("" if case["true_model_l2"] is None else
                              f", true model {case['true_model_l2'] * 1e3:.1f} mm")
+                          + ("" if not case["truth_in_identified_range"] else
+                             ", truth in the range the recordings leave open: "
+                             + ", ".join(f"{k} {'yes' if v else 'NO'}"
+                                         for k, v in case["truth_in_identified_range"].items()))
                           + f"; motion change {case['signal_mm']:.1f} mm, {case['step_change_mm']:.1f} mm "
                             "of it moves at twice the steps", file=sys.stderr, flush=True)
     for noise in args.noise_mm:
