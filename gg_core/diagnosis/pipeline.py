@@ -375,8 +375,9 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     timings["joint_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
+    recordings_l2 = (baseline_train_l2 * len(train) + baseline_l2 * len(heldout)) / (len(train) + len(heldout))
     delivered, delivered_sim = (None, None) if model is None else final_fit(sim, *model, train + heldout,
-                                                                            attached, refit_config)
+                                                                            attached, refit_config, recordings_l2)
     if delivered is not None:
         progress.step(f"final fit of {' + '.join(accepted)} on every recording")
     timings["final_fit_s"] = time.perf_counter() - t0
@@ -411,15 +412,16 @@ def _trialled_model(name: str, folds: list[Fold], ctx: Context
 
 
 def final_fit(sim: ImplicitSimulator, chosen: list[tuple[Candidate, np.ndarray]], ctx: Context,
-              fits: list[tuple[str, dict]], recordings: list[Observed], attached: np.ndarray, config: FitConfig
-              ) -> tuple[Trial, ImplicitSimulator]:
+              fits: list[tuple[str, dict]], recordings: list[Observed], attached: np.ndarray, config: FitConfig,
+              baseline_l2: float) -> tuple[Trial, ImplicitSimulator]:
     """The accepted model refitted on EVERY recording, held-out ones included, once held-out rollouts have
     confirmed it (confirm.fitted_trial in the accepted trial's form), and that simulator: the model the diagnosis
     delivers (stages.diagnose writes it for `gg simulate --behavior`). It starts from whichever of the labelled
     `fits` (the split's fit, the other folds' fits: _trialled_model) rolls every recording out best
     (confirm.best_fit), and keeps the refit only where it rolls every recording out better still
     (confirm.refit_or_keep). Every held-out figure of the report stays the split's, whose fit never saw those
-    recordings. The delivered effect parameters' profiles over every recording (identify.profiles) say how
+    recordings. The delivered effect parameters' profiles over every recording (identify.profiles, against
+    `baseline_l2`: the baseline's mean rollout error over `recordings`, measured when it was fitted) say how
     precisely the recordings fix each of them.
 
     Why: which effect is missing is decided on held-out recordings; the model a user simulates new motions with
@@ -434,7 +436,6 @@ def final_fit(sim: ImplicitSimulator, chosen: list[tuple[Candidate, np.ndarray]]
     of 56 s (/work/data/s42/tilt.py)."""
     delivered, delivered_sim, params = fitted_trial(sim, BASELINE_FIT, chosen, ctx, ctx.region, recordings, [],
                                                     attached, config, fits)
-    baseline_l2 = mean_rollout_error(sim, recordings, attached)
     delivered.identified = {p.parameter: p.to_json() for p in profiles(delivered_sim, params, len(BASELINE_FIT),
                                                                        recordings, attached, baseline_l2)}
     return delivered, delivered_sim

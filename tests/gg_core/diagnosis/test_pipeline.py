@@ -348,9 +348,8 @@ def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_fits(
 
     monkeypatch.setattr(pipeline, "fitted_trial", fake_trial)
     monkeypatch.setattr(pipeline, "profiles", fake_profiles)
-    monkeypatch.setattr(pipeline, "mean_rollout_error", lambda sim, recordings, pinned: 0.005)   # the baseline's
     recordings = [Observed(n, np.zeros((3, 2, 3)), None, 30.0) for n in ("a", "b", "c")]
-    final, simulator = pipeline.final_fit(None, chosen, ctx, fits, recordings, None, None)
+    final, simulator = pipeline.final_fit(None, chosen, ctx, fits, recordings, None, None, 0.005)   # the baseline's
     assert calls == [(chosen, ctx.region, ["a", "b", "c"], [], fits),
                      ("the refitted simulator", "its params", len(pipeline.BASELINE_FIT), ["a", "b", "c"], 0.005)]
     assert final.train_l2 == 0.003 and simulator == "the refitted simulator"   # what stages.diagnose writes
