@@ -110,9 +110,8 @@ def stiff_half(bending_log: float, region_range: dict[str, tuple[float, float]] 
     return sim, params
 
 
-def tilted_fall() -> tuple[Observed, np.ndarray]:
-    """12 frames of the hanging sheet falling under a 2 m/s^2 tilt, and its pinned vertices."""
-    truth = hanging(2.0)
+def fall(truth: ImplicitSimulator) -> tuple[Observed, np.ndarray]:
+    """12 frames of `truth`'s sheet falling from rest (no body), and its pinned vertices."""
     rest = truth.cloth.template
     return (Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0),
             truth.cloth.pinned)

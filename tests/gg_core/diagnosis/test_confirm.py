@@ -17,7 +17,7 @@ from gg_core.physics.forces import DEFAULT_TERMS, make_terms
 from gg_core.physics.material import MATERIAL_NAMES, Material, to_latent
 from gg_core.physics.simulator import ClothState, ImplicitSimulator
 
-from diagnosis_helpers import hanging, stiff_half, tilted_fall
+from diagnosis_helpers import fall, hanging, stiff_half
 from physics_helpers import sheet, uv_sphere
 
 
@@ -71,10 +71,7 @@ def test_golden_section_finds_the_minimum_of_a_unimodal_function():
 
 def test_a_tilt_the_refit_underestimates_is_scaled_on_training_rollouts():
     truth = hanging(2.0)
-    rest = truth.cloth.template
-    observed = Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12),
-                        None, 30.0)
-    pinned = truth.cloth.pinned
+    observed, pinned = fall(truth)
     sim = hanging(0.5)
     params = CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {})
     before = rollout_error(sim, observed, pinned)
@@ -124,7 +121,7 @@ def _start(density: float) -> tuple[ImplicitSimulator, CandidateParams]:
 
 
 def test_a_refit_that_spoils_the_rollouts_loses_to_the_unrefitted_start_and_is_restarted_from_it(monkeypatch):
-    observed, pinned = tilted_fall()
+    observed, pinned = fall(hanging(2.0))
     true_density = float(hanging(2.0).cloth.material.density[0])
     # the refit from the regression's start moves the density 4x off; restarted from the scaled start, to the truth
     starts = _refit_to(monkeypatch, [4.0 * true_density, true_density])
@@ -140,7 +137,7 @@ def test_a_refit_that_spoils_the_rollouts_loses_to_the_unrefitted_start_and_is_r
 
 
 def test_the_unrefitted_start_is_kept_where_every_refit_spoils_the_rollouts(monkeypatch):
-    observed, pinned = tilted_fall()
+    observed, pinned = fall(hanging(2.0))
     true_density = float(hanging(2.0).cloth.material.density[0])
     starts = _refit_to(monkeypatch, [4.0 * true_density, 4.0 * true_density])
     sim, params = _start(true_density)
@@ -153,7 +150,7 @@ def test_the_unrefitted_start_is_kept_where_every_refit_spoils_the_rollouts(monk
 
 
 def test_a_refit_that_rolls_out_as_well_is_kept_without_a_restart(monkeypatch):
-    observed, pinned = tilted_fall()
+    observed, pinned = fall(hanging(2.0))
     true_density = float(hanging(2.0).cloth.material.density[0])
     starts = _refit_to(monkeypatch, [true_density])
     sim, params = _start(3.0 * true_density)
@@ -165,7 +162,7 @@ def test_a_refit_that_rolls_out_as_well_is_kept_without_a_restart(monkeypatch):
 
 def test_a_zero_coefficient_is_only_refitted(monkeypatch):
     """Without a coefficient the unrefitted start is the baseline itself: nothing to scale, no restart."""
-    observed, pinned = tilted_fall()
+    observed, pinned = fall(hanging(2.0))
     true_density = float(hanging(2.0).cloth.material.density[0])
     starts = _refit_to(monkeypatch, [4.0 * true_density])
     sim = hanging(0.0)
@@ -179,10 +176,7 @@ def test_a_zero_coefficient_is_only_refitted(monkeypatch):
 def test_a_region_start_the_refit_spoils_is_kept_without_a_repeated_refit(monkeypatch):
     """A region candidate's start (its regression scales) is the unrefitted option too; with nothing to scale,
     the refit is not repeated from it."""
-    truth, _ = stiff_half(np.log(30.0))
-    rest = truth.cloth.template
-    observed = Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0)
-    pinned = truth.cloth.pinned
+    observed, pinned = fall(stiff_half(np.log(30.0))[0])
     calls = []
 
     def spoiling_refit(sim, params, train, trainable, config):
@@ -212,10 +206,7 @@ def test_a_region_start_the_refit_spoils_is_kept_without_a_repeated_refit(monkey
 def test_a_region_the_refit_left_too_soft_is_scaled_on_training_rollouts_within_its_range():
     """A refit that reached bending x3 on a region whose truth is x30: raised to the power that rolls the training
     sequences out best, x30 where its range allows it, its range's end where not."""
-    truth, _ = stiff_half(np.log(30.0))
-    rest = truth.cloth.template
-    observed = Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0)
-    pinned = truth.cloth.pinned
+    observed, pinned = fall(stiff_half(np.log(30.0))[0])
     for top, expected, gain in ((200.0, 30.0, 0.1), (10.0, 11.0, 0.7)):
         sim, params = stiff_half(np.log(3.0), {"bending": (np.log(0.1), np.log1p(top))})
         before = rollout_error(sim, observed, pinned)
@@ -238,7 +229,7 @@ def _final_fit(*warm: dict[str, object]):
     `warm` (the split's first)."""
     v, f = sheet(6, 6, 0.3, 0.3)
     base = ImplicitSimulator(Cloth(v, f, pinned=np.abs(v[:, 2] + 0.15) < 1e-9), terms=make_terms(DEFAULT_TERMS))
-    observed, pinned = tilted_fall()
+    observed, pinned = fall(hanging(2.0))
     return fitted_trial(base, ("collision.margin",), [(BY_NAME["gravity_offset"], np.array([0.5, 0.0]))], None,
                         None, [observed], [], pinned, FitConfig(),
                         [(f"fit {i}", values) for i, values in enumerate(warm)])

@@ -7,10 +7,9 @@ import torch
 
 from gg_core.diagnosis.confirm import CandidateParams
 from gg_core.diagnosis.identify import Profile, profiles
-from gg_core.physics.fitting import Observed, mean_rollout_error
-from gg_core.physics.simulator import ClothState
+from gg_core.physics.fitting import mean_rollout_error
 
-from diagnosis_helpers import hanging, stiff_half, tilted_fall
+from diagnosis_helpers import fall, hanging, stiff_half
 
 
 def test_a_profile_range_is_where_the_rollouts_cross_the_tolerance_in_log_factor():
@@ -26,7 +25,7 @@ def test_a_profile_range_is_where_the_rollouts_cross_the_tolerance_in_log_factor
 
 
 def test_a_tilt_delivered_at_its_truth_is_fixed_to_a_range_around_it():
-    observed, pinned = tilted_fall()
+    observed, pinned = fall(hanging(2.0))
     sim = hanging(2.0)
     params = CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {})
     before = params.snapshot()
@@ -43,17 +42,10 @@ def test_a_tilt_delivered_at_its_truth_is_fixed_to_a_range_around_it():
     assert mean_rollout_error(sim, [observed], pinned) == pytest.approx(errors[1.0], abs=1e-12)
 
 
-def _stiff_fall(bending: float) -> tuple[Observed, np.ndarray]:
-    truth, _ = stiff_half(np.log(bending))
-    rest = truth.cloth.template
-    return (Observed("fall", truth.rollout(ClothState(rest.copy(), np.zeros_like(rest)), None, 12), None, 30.0),
-            truth.cloth.pinned)
-
-
 def test_a_region_scale_is_profiled_as_a_ratio_to_the_garment_own_field():
     """Each point is the better of the rest held and the region's own value held: a region covering the whole
     garment leaves its ratio to the garment's bending free (the product is what moves it), a half does not."""
-    observed, pinned = _stiff_fall(30.0)
+    observed, pinned = fall(stiff_half(np.log(30.0))[0])
     sim, params = stiff_half(np.log(30.0))
     (half,) = profiles(sim, params, 1, [observed], pinned, mean_rollout_error(stiff_half(0.0)[0], [observed], pinned))
     assert half.parameter == "region.bending_scale" and half.traded_against == ["material.bending"]
@@ -67,8 +59,6 @@ def test_a_region_scale_is_profiled_as_a_ratio_to_the_garment_own_field():
     params.apply(whole.cloth)
     whole.refresh()
     assert float(whole.cloth.material.bending[0]) == pytest.approx(truth_bending)
-    whole_fall = Observed("fall", whole.rollout(ClothState(whole.cloth.template.copy(),
-                                                           np.zeros_like(whole.cloth.template)), None, 12), None,
-                          30.0)
+    whole_fall, _ = fall(whole)
     (ratio,) = profiles(whole, params, 1, [whole_fall], pinned, 1e-3)
     assert max(ratio.rollout_l2) < 1e-6 and ratio.range() == (None, None)
