@@ -147,10 +147,9 @@ def fitted_trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: lis
                  pinned: np.ndarray, config: FitConfig, warm: list[tuple[str, dict[str, object]]] | None = None
                  ) -> tuple[Trial, ImplicitSimulator, CandidateParams]:
     """trial, and the refitted simulator itself (what the diagnosis delivers of its final fit) with its
-    parameters. `warm`: labelled
-    values (Trial.values) of earlier trials of the same candidates to start from instead of the candidates'
-    coefficients on the baseline: the one that rolls `train` out best (best_fit), refitted where that helps
-    (refit_or_keep)."""
+    parameters. `warm`: labelled values (Trial.values) of earlier trials of the same candidates to start from
+    instead of the candidates' coefficients on the baseline: the one that rolls `train` out best (best_fit),
+    refitted where that helps (refit_or_keep)."""
     start = time.perf_counter()
     change = merge([cand.model(coefs, ctx) for cand, coefs in chosen])
     compared: dict[str, float] = {}
