@@ -20,7 +20,7 @@ from ..physics.solver import SolverOptions
 from .confirm import Trial, fitted_trial, trial
 from .features import FEATURES, state_features
 from .folds import CrossValidation, Fold, extra_splits, finalists
-from .identify import profiles
+from .identify import PROFILE_TOLERANCE, profiles
 from .library import BY_NAME, CANDIDATES, Candidate, Context
 from .localize import Localization, activity_map, localize
 from .residuals import FrameBatch, Pooling, build_frames, make_pooling, nuisance_changes, residual, responses
@@ -417,9 +417,10 @@ def final_fit(sim: ImplicitSimulator, chosen: list[tuple[Candidate, np.ndarray]]
     """The accepted model refitted on EVERY recording, held-out ones included, once held-out rollouts have
     confirmed it (confirm.fitted_trial in the accepted trial's form), and that simulator: the model the diagnosis
     delivers (stages.diagnose writes it for `gg simulate --behavior`). It starts from whichever of the labelled
-    `fits` (the split's fit, the other folds' fits: _trialled_model) rolls every recording out best
-    (confirm.best_fit), and keeps the refit only where it rolls every recording out better still
-    (confirm.refit_or_keep). Every held-out figure of the report stays the split's, whose fit never saw those
+    `fits` (the split's fit, the other folds' fits: _trialled_model) rolls every recording out best, or from the
+    central one of three or more that roll them out within PROFILE_TOLERANCE x `baseline_l2` of the best (the
+    recordings do not tell those apart: confirm.best_fit), and keeps the refit only where it rolls every
+    recording out better still (confirm.refit_or_keep). Every held-out figure of the report stays the split's, whose fit never saw those
     recordings. The delivered effect parameters' profiles over every recording (identify.profiles, against
     `baseline_l2`: the baseline's mean rollout error over `recordings`, measured when it was fitted) say how
     precisely the recordings fix each of them.
@@ -435,7 +436,7 @@ def final_fit(sim: ImplicitSimulator, chosen: list[tuple[Candidate, np.ndarray]]
     tilt came out 2.83 m/s^2 (the split's 2.21, the truth about 2.09); from the split's fit 2.23, in 39 s instead
     of 56 s (/work/data/s42/tilt.py)."""
     delivered, delivered_sim, params = fitted_trial(sim, BASELINE_FIT, chosen, ctx, ctx.region, recordings, [],
-                                                    attached, config, fits)
+                                                    attached, config, fits, PROFILE_TOLERANCE * baseline_l2)
     delivered.identified = {p.parameter: p.to_json() for p in profiles(delivered_sim, params, len(BASELINE_FIT),
                                                                        recordings, attached, baseline_l2)}
     return delivered, delivered_sim

@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from gg_core.diagnosis import confirm
-from gg_core.diagnosis.confirm import (CandidateParams, at_values, fitted_trial, golden_section, refit_or_scale,
-                                      rollout_choice, rollout_scale, scale_label)
+from gg_core.diagnosis.confirm import (CandidateParams, at_values, central_fit, fitted_trial, golden_section,
+                                      refit_or_scale, rollout_choice, rollout_scale, scale_label)
 from gg_core.diagnosis.library import BY_NAME, Context
 from gg_core.physics.cloth import Cloth
 from gg_core.physics.contact import BodyCollider
@@ -224,15 +224,15 @@ def _split_fit(density: float, tilt: float = 2.0) -> dict[str, object]:
     return CandidateParams(sim.cloth, sim, ("collision.margin", "gravity_offset.delta_g"), None, {}).values()
 
 
-def _final_fit(*warm: dict[str, object]):
+def _final_fit(*warm: dict[str, object], tie: float = 0.0):
     """fitted_trial of the tilt on a baseline without one, from its coefficients (0.5, 0) and the earlier fits
-    `warm` (the split's first)."""
+    `warm` (the split's first), those rolling out within `tie` (m) of the best tied."""
     v, f = sheet(6, 6, 0.3, 0.3)
     base = ImplicitSimulator(Cloth(v, f, pinned=np.abs(v[:, 2] + 0.15) < 1e-9), terms=make_terms(DEFAULT_TERMS))
     observed, pinned = fall(hanging(2.0))
     return fitted_trial(base, ("collision.margin",), [(BY_NAME["gravity_offset"], np.array([0.5, 0.0]))], None,
                         None, [observed], [], pinned, FitConfig(),
-                        [(f"fit {i}", values) for i, values in enumerate(warm)])
+                        [(f"fit {i}", values) for i, values in enumerate(warm)], tie)
 
 
 def test_a_warm_start_keeps_the_split_fit_where_its_refit_rolls_out_worse(monkeypatch):
@@ -270,6 +270,38 @@ def test_the_final_fit_starts_from_the_earlier_fit_that_rolls_out_best(monkeypat
     assert set(trial.compared) == {"fit 0", "fit 1", "fit 2"} and min(trial.compared.values()) == trial.train_l2
     assert trial.compared["fit 0"] > 1e-4 and trial.compared["fit 1"] > 1e-4
     assert float(sim.cloth.material.density[0]) == pytest.approx(true_density)
+
+
+def test_among_fits_the_recordings_do_not_tell_apart_the_final_fit_starts_from_the_central_one(monkeypatch):
+    """confirm.best_fit: where three fits roll out within the tie, the one between the others is delivered, not
+    the one that rolls out a hair better (the truth's 2 here, so the tie is far wider than a real one)."""
+    true_density = float(hanging(2.0).cloth.material.density[0])
+    fits = (_split_fit(true_density, 1.0), _split_fit(true_density, 2.0), _split_fit(true_density, 1.4))
+    _refit_to(monkeypatch, [4.0 * true_density])
+    best, _, _ = _final_fit(*fits)
+    assert best.start == "fit 1" and best.values["gravity_offset.delta_g"] == [2.0, 0.0, 0.0]
+    _refit_to(monkeypatch, [4.0 * true_density])
+    tied, _, _ = _final_fit(*fits, tie=1.0)
+    assert tied.start == "fit 2 (the central one of 3 fits rolling out within 1000.00 mm)"
+    assert tied.values["gravity_offset.delta_g"] == pytest.approx([1.4, 0.0, 0.0])
+    assert tied.train_l2 == tied.compared["fit 2"] > best.train_l2   # kept: the refit spoils the material
+    _refit_to(monkeypatch, [4.0 * true_density])
+    narrow = max(best.compared.values()) - best.train_l2   # the worst fit outside: at most two tie, the best wins
+    assert _final_fit(*fits, tie=0.5 * narrow)[0].start == "fit 1"
+
+
+def test_the_central_fit_weighs_scales_in_log_and_vectors_by_their_length():
+    errors = {"a": 3.0, "b": 1.0, "c": 2.0}
+    alpha = {"a": {"mass_damping.alpha": 10.3}, "b": {"mass_damping.alpha": 15.4}, "c": {"mass_damping.alpha": 9.5}}
+    assert central_fit(alpha, ("mass_damping.alpha",), errors) == "a"
+    tilt = {k: {"gravity_offset.delta_g": v} for k, v in
+            (("a", [1.55, 0.0, -0.06]), ("b", [2.32, 0.0, -0.05]), ("c", [2.12, 0.0, 0.06]))}
+    assert central_fit(tilt, ("gravity_offset.delta_g",), errors) == "c"
+    # bending x4 .. x160 in log: x19 is between; the stretch scales alone would pick b
+    region = {k: {"region.stretch_scale": s, "region.bending_scale": b} for k, s, b in
+              (("a", 1.01, 4.3), ("b", 1.01, 160.0), ("c", 0.37, 19.0))}
+    assert central_fit(region, ("region.stretch_scale", "region.bending_scale"), errors) == "c"
+    assert central_fit(region, ("region.stretch_scale",), errors) == "b"   # a and b tie: the lower error
 
 
 def test_at_values_sets_the_material_the_terms_and_the_region_scales():

@@ -338,8 +338,8 @@ def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_fits(
     assert fits == [("the split's fit", kept.values), ("the fit without a", fold_a.values)]   # where it starts
     calls = []
 
-    def fake_trial(base, base_fit, chosen, ctx, region, train, heldout, pinned, config, warm):
-        calls.append((chosen, region, [o.name for o in train], heldout, warm))
+    def fake_trial(base, base_fit, chosen, ctx, region, train, heldout, pinned, config, warm, tie):
+        calls.append((chosen, region, [o.name for o in train], heldout, warm, tie))
         return Trial([c.name for c, _ in chosen], float("nan"), 1.0, 0.003), "the refitted simulator", "its params"
 
     def fake_profiles(sim, params, first, recordings, pinned, baseline_l2):
@@ -350,7 +350,7 @@ def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_fits(
     monkeypatch.setattr(pipeline, "profiles", fake_profiles)
     recordings = [Observed(n, np.zeros((3, 2, 3)), None, 30.0) for n in ("a", "b", "c")]
     final, simulator = pipeline.final_fit(None, chosen, ctx, fits, recordings, None, None, 0.005)   # the baseline's
-    assert calls == [(chosen, ctx.region, ["a", "b", "c"], [], fits),
+    assert calls == [(chosen, ctx.region, ["a", "b", "c"], [], fits, pytest.approx(0.05 * 0.005)),
                      ("the refitted simulator", "its params", len(pipeline.BASELINE_FIT), ["a", "b", "c"], 0.005)]
     assert final.train_l2 == 0.003 and simulator == "the refitted simulator"   # what stages.diagnose writes
     assert final.identified["wind.velocity"]["range_factors"] == [pytest.approx(0.5 ** 0.25), None]
