@@ -8,11 +8,19 @@ system time in spin-waits). Independent sequences in separate processes use ever
 Jobs run in `spawn`ed processes (no forked torch or numba state); a worker reports progress by
 `step(message, advance)`, which puts it on a queue the parent drains into its `Progress`. Cancelling the add-on's
 job kills the whole process group, workers included (blender_addon/jobs.py).
+
+Jobs and results cross as plain pickle bytes, never through multiprocessing's own pickler: torch registers a
+reduction with it that moves every pickled CPU tensor's storage into shared memory in place, in the sending
+process, and frees the old buffer, so a NumPy view of that tensor the sender still holds (`tensor.numpy()`: the
+simulator's Numeric arrays are such views of the cloth's tensors) points at freed memory. Found in session 47: a
+`gg diagnose` with two workers left its own baseline simulator rolling the recordings out at 585 km (a fresh copy
+of it: 8.6 mm) once the trial jobs had been sent; in a short test the freed view segfaulted on reading.
 """
 from __future__ import annotations
 
 import multiprocessing
 import os
+import pickle
 import queue
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -70,7 +78,7 @@ def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progre
 
         def submit(i: int, job: J) -> None:
             nonlocal started
-            pending[pool.submit(_run, fn, job, started)] = (i, job, started)
+            pending[pool.submit(_run, pickle.dumps((fn, job)), started)] = (i, job, started)
             started += 1
 
         for i, job in enumerate(jobs):
@@ -88,9 +96,10 @@ def run_jobs(fn: Callable[[J, Step], R], jobs: Sequence[J], workers: int, progre
                 if future.exception() is not None:
                     errors.append(future.exception())
                     continue
-                follow = then(job, future.result()) if then is not None else None
+                result = pickle.loads(future.result())
+                follow = then(job, result) if then is not None else None
                 if follow is None:
-                    results[i] = future.result()
+                    results[i] = result
                 else:
                     submit(i, follow)
             try:
@@ -125,7 +134,8 @@ def _init_worker(messages) -> None:
         os.environ[name] = "1"
 
 
-def _run(fn: Callable[[J, Step], R], job: J, key: int) -> R:
+def _run(task: bytes, key: int) -> bytes:
+    """The pickled (fn, job)'s result, pickled (see the module docstring: not by multiprocessing's pickler)."""
     import numba  # noqa: PLC0415 - after _init_worker limited the threads
     import torch  # noqa: PLC0415
 
@@ -136,6 +146,7 @@ def _run(fn: Callable[[J, Step], R], job: J, key: int) -> R:
         _queue.put((message, advance))
 
     try:
-        return fn(job, step)
+        fn, job = pickle.loads(task)
+        return pickle.dumps(fn(job, step))
     finally:
         _queue.put((None, key))   # this run ended: all its steps are on the queue before this

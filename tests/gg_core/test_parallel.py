@@ -33,6 +33,10 @@ def die_on_two(job: int, step) -> int:
     return job
 
 
+def tensor_sum(job, step) -> float:
+    return float(job.sum())
+
+
 def _progress(total: int) -> tuple[Progress, io.StringIO]:
     stream = io.StringIO()
     return Progress("test", total, "jsonl", stream), stream
@@ -92,3 +96,16 @@ def test_follow_up_jobs_run_after_their_job_and_give_its_result():
         assert sorted(messages) == ["half 3", "half 4", "half 5", "start 10", "start 6", "start 8"]
         for value, half in ((8, 4), (6, 3), (10, 5)):     # each follow-up after its own job
             assert messages.index(f"start {value}") < messages.index(f"half {half}")
+
+
+def test_sending_a_tensor_to_a_worker_leaves_the_parents_numpy_views_of_it_valid():
+    """multiprocessing's own pickler would move the tensor's storage into shared memory and free the buffer a
+    NumPy view of it still points at (parallel.py's docstring); the view must stay the tensor's memory."""
+    import torch
+
+    tensors = [torch.arange(100_000, dtype=torch.float64) * k for k in (1, 2)]
+    views = [t.numpy() for t in tensors]
+    progress, _ = _progress(2)
+    assert run_jobs(tensor_sum, tensors, 2, progress) == [float(t.sum()) for t in tensors]
+    assert all(t.data_ptr() == v.ctypes.data for t, v in zip(tensors, views))   # checked before reading the views
+    assert all(float(v.sum()) == float(t.sum()) for t, v in zip(tensors, views))
