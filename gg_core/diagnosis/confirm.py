@@ -209,11 +209,12 @@ def best_fit(fits: list[tuple[str, tuple[ImplicitSimulator, CandidateParams]]], 
     fits of stored Blender diagnoses (sessions 43-46, 20 steps, noise 0; /work/data/s46/final_ranges.py): air
     damping s2, the fits' alpha 10.29 (the split's), 15.42, 9.48 /s rolled out 5.73, 5.60, 5.73 mm (tie 0.47 mm):
     delivered 15.4 /s (54 % off, the truth outside its profile's range) before, 10.29 (2.9 %, range 7.5-16.3) now;
-    tilt s1, 1.55, 2.32, 2.12 m/s^2 at 8.08, 8.61, 8.43 mm (tie 0.69): the tilt 26 % off before, 1.6 % now; tilt s2,
-    2.27, 2.28, 2.56 at 8.57, 8.65, 8.47 mm (tie 0.77): 22.7 % before, 8.9 % now; but air damping s1, 10.46 (the
-    split's), 9.93, 11.64 at 5.38, 5.05, 5.37 mm (tie 0.44): 0.7 % before, 8.1 % now (the split's, refitted:
-    10.81). The stiff patches are unchanged (s1: one fit outside the tie; s2: the same fit is central). Chosen after
-    seeing these truths, on seven cases."""
+    tilt s1, 1.55, 2.32, 2.12 m/s^2 at 8.08, 8.61, 8.43 mm (tie 0.69): the tilt 26 % off before, 3.3 % now (the
+    tilt vector's error, as `gg bench diagnose` scores it; end to end the same); tilt s2, 2.27, 2.28, 2.56 at 8.57,
+    8.65, 8.47 mm (tie 0.77): 22.7 % before, 11.3 % now; but air damping s1, 10.46 (the split's), 9.93, 11.64 at
+    5.38, 5.05, 5.37 mm (tie 0.44): 0.7 % before, 8.1 % now (the split's, refitted: 10.81). The stiff patches are
+    unchanged (s1: one fit outside the tie; s2: the same fit is central). Chosen after seeing these truths, on
+    seven cases."""
     errors = {label: mean_rollout_error(sim, train, pinned) for label, (sim, _) in fits}
     low = min(errors.values())
     close = [label for label in errors if errors[label] <= low + tie]

@@ -420,8 +420,8 @@ def final_fit(sim: ImplicitSimulator, chosen: list[tuple[Candidate, np.ndarray]]
     `fits` (the split's fit, the other folds' fits: _trialled_model) rolls every recording out best, or from the
     central one of three or more that roll them out within PROFILE_TOLERANCE x `baseline_l2` of the best (the
     recordings do not tell those apart: confirm.best_fit), and keeps the refit only where it rolls every
-    recording out better still (confirm.refit_or_keep). Every held-out figure of the report stays the split's, whose fit never saw those
-    recordings. The delivered effect parameters' profiles over every recording (identify.profiles, against
+    recording out better still (confirm.refit_or_keep). Every held-out figure of the report stays the split's,
+    whose fit never saw those recordings. The delivered effect parameters' profiles over every recording (identify.profiles, against
     `baseline_l2`: the baseline's mean rollout error over `recordings`, measured when it was fitted) say how
     precisely the recordings fix each of them.
 
