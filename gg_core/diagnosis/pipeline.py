@@ -421,9 +421,9 @@ def final_fit(sim: ImplicitSimulator, chosen: list[tuple[Candidate, np.ndarray]]
     central one of three or more that roll them out within PROFILE_TOLERANCE x `baseline_l2` of the best (the
     recordings do not tell those apart: confirm.best_fit), and keeps the refit only where it rolls every
     recording out better still (confirm.refit_or_keep). Every held-out figure of the report stays the split's,
-    whose fit never saw those recordings. The delivered effect parameters' profiles over every recording (identify.profiles, against
-    `baseline_l2`: the baseline's mean rollout error over `recordings`, measured when it was fitted) say how
-    precisely the recordings fix each of them.
+    whose fit never saw those recordings. The delivered effect parameters' profiles over every recording
+    (identify.profiles, against `baseline_l2`: the baseline's mean rollout error over `recordings`, measured when it
+    was fitted) say how precisely the recordings fix each of them.
 
     Why: which effect is missing is decided on held-out recordings; the model a user simulates new motions with
     should then have seen every motion recorded (model selection by cross-validation, the selected model fitted on
