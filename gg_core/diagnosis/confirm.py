@@ -40,7 +40,7 @@ from ..physics.cloth import Cloth
 from ..physics.fitting import (BehaviorParams, FitConfig, Observed, TeacherForced, mean_rollout_error, minimize_lbfgs)
 from ..physics.material import MATERIAL_NAMES, Material
 from ..physics.simulator import ImplicitSimulator
-from .library import Candidate, Context, ModelChange, apply_region, with_terms
+from .library import Candidate, Context, ModelChange, apply_region, region_value, with_terms
 
 SCALE_RANGE = (0.25, 8.0)   # factors on a candidate's refitted coefficients tried on training rollouts
 SCALE_EVALUATIONS = 11      # golden-section steps: the factor to within 3 %
@@ -89,7 +89,7 @@ class CandidateParams(BehaviorParams):
         out: dict[str, object] = {f"material.{k}": v for k, v in self.global_values().items()}
         for term, key, _ in self.term_refs:
             out[f"{term.name}.{key}"] = term.params[key].detach().tolist()
-        out.update({f"region.{k}_scale": float(np.exp(float(s))) for k, s in zip(self.region_keys, self.region_s)})
+        out.update({region_value(k): float(np.exp(float(s))) for k, s in zip(self.region_keys, self.region_s)})
         return out
 
 
@@ -156,7 +156,7 @@ def fitted_trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: lis
     if warm:
         (sim, params), kept_error, origin, compared = best_fit(
             [(label, _at_start(base, base_fit, change, region, config, values)) for label, values in warm],
-            train, pinned, change.fit + tuple(f"region.{k}_scale" for k in change.region), tie)
+            train, pinned, change.fit + tuple(map(region_value, change.region)), tie)
         loss, train_error, start_label = refit_or_keep(sim, params, train, pinned, config, kept_error, origin)
     else:
         sim, params = _at_start(base, base_fit, change, region, config, None)
@@ -253,7 +253,7 @@ def at_values(cloth: Cloth, sim: ImplicitSimulator, region_logs: dict[str, float
         for key in term.params:
             if (value := values.get(f"{term.name}.{key}")) is not None:
                 term.params[key] = torch.tensor(value, dtype=torch.float64)
-    return {k: float(np.log(values[f"region.{k}_scale"])) for k in region_logs}
+    return {k: float(np.log(values[region_value(k)])) for k in region_logs}
 
 
 def refit_or_keep(sim: ImplicitSimulator, params: CandidateParams, train: list[Observed], pinned: np.ndarray,

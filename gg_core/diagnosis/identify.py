@@ -29,6 +29,7 @@ from ..physics.fitting import Observed, mean_rollout_error
 from ..physics.material import MATERIAL_NAMES, from_latent, to_latent
 from ..physics.simulator import ImplicitSimulator
 from .confirm import CandidateParams
+from .library import region_value
 
 PROFILE_FACTORS = (0.25, 0.5, 0.71, 1.41, 2.0, 4.0)   # multiples of the delivered value (1 is the delivered model)
 PROFILE_TOLERANCE = 0.05   # of the baseline's error: half the smallest gain the diagnosis accepts (min_gain 10 %)
@@ -103,7 +104,7 @@ def profiles(sim: ImplicitSimulator, params: CandidateParams, first: int, record
             ratio = rollout(_scale_region, j, f, [])
             absolute = rollout(_scale_region, j, f, fields) if fields else ratio
             errors.append(min(ratio, absolute))
-        out.append(Profile(f"region.{key}_scale", grid, errors, [f"material.{n}" for n in fields], baseline_l2))
+        out.append(Profile(region_value(key), grid, errors, [f"material.{n}" for n in fields], baseline_l2))
     params.restore(sim, delivered)
     return out
 

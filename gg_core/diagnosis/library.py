@@ -105,6 +105,11 @@ def with_terms(terms: list[Term], extra: dict[str, dict]) -> list[Term]:
         [TERMS[n](**p) for n, p in extra.items() if n not in names]
 
 
+def region_value(field: str) -> str:
+    """The Trial.values key of a region's scale factor on `field` ('stretch' -> 'region.stretch_scale')."""
+    return f"region.{field}_scale"
+
+
 def apply_region(cloth: Cloth, region: np.ndarray, logs: dict[str, torch.Tensor | float]) -> None:
     """Scale the region's material and rest lengths by exp(log x weight), in place and differentiable in `logs`
     ('density', 'stretch' = mu and lambda, 'bending', 'rest')."""
@@ -318,7 +323,7 @@ def _region_range(keys: tuple[str, ...], bounds: tuple[float, float]
 
     def check(values: dict[str, object], cloth: Cloth) -> str | None:
         for key in keys:
-            scale = float(values.get(f"region.{key}_scale", 1.0))
+            scale = float(values.get(region_value(key), 1.0))
             if not lo * (1.0 - 1e-3) <= scale <= hi * (1.0 + 1e-3):
                 return (f"the region's {key} refitted to x{scale:.3g}, outside this candidate's range "
                         f"x{lo:g}-x{hi:g}: the term stands in for something else")
