@@ -293,7 +293,7 @@ def summary(report: dict) -> str:
     accepted: the joint refit is what was confirmed), the form it was refitted in where the candidate has several
     (library.Form), and the candidate it was chosen over where the rollouts tied
     (folds.CrossValidation.residual_tie_break) or, where nothing chose, the rivals it was not told from
-    (pipeline.unresolved), and the delivered values the recordings do not fix at all (identify.profiles: every
+    (verdict.unresolved), and the delivered values the recordings do not fix at all (identify.profiles: every
     multiple profiled rolls out about as well), which a user should not read as measured."""
     if report.get("verdict") != "missing":
         return "Nothing missing: the simulator explains the recordings"

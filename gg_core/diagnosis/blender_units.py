@@ -26,7 +26,7 @@ def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
     (wind_push: what the data determine, as for the tilt).
 
     gravity: the tilt, tan of its angle from the vertical along x and z. The diagnosis's vertical gravity stays
-    9.81 m/s^2 (a vertical change is the material's free scale: pipeline.BASELINE_FIT), so its horizontal offset
+    9.81 m/s^2 (a vertical change is the material's free scale: baseline.BASELINE_FIT), so its horizontal offset
     is a tilt of that gravity. Measured on the four gravity captures of session 22 (hidden gravity 1.25 x 9.81
     tilted 12 deg: horizontal 2.55 m/s^2): refitted offsets 1.97-2.28 m/s^2, tilts 11.3-13.1 deg (9.81 tan 12 deg
     = 2.09 m/s^2), so the offset in m/s^2 was off by 11-23 % and the tilt by 3-10 %."""

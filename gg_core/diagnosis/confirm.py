@@ -3,7 +3,7 @@
 A trial copies the baseline simulator, switches the candidates' force-library terms on (or scales the region's
 material fields), and refits the global material together with the candidates' coefficients on the training
 sequences (teacher-forced prediction a few frames ahead of observed states, L-BFGS, warm-started from the baseline
-and the regression's coefficients, or from probe sizes: pipeline._trial_from_starts). Its held-out rollout error
+and the regression's coefficients, or from probe sizes: starts.trial_from_starts). Its held-out rollout error
 decides: an effect is accepted only if it lowers the error by at least `min_gain` relative to the baseline, and
 also lowers the free-rollout error of the training sequences (a real effect helps every recording; a term that
 only helps the held-out one got lucky among the many tried). The regression only proposes; rollouts decide,
@@ -19,7 +19,7 @@ material where the one-frame residual is mostly measurement error.
 
 Vector coefficients (a wind's pressure, a gravity tilt) are refitted as one log-scale of the start's vector, so
 the refit keeps its direction; the direction comes from the regression or from the baseline's rollout lag
-(pipeline.lag_start), whichever start the training rollouts prefer. Measured and not kept (session 6): refitting
+(starts.lag_start), whichever start the training rollouts prefer. Measured and not kept (session 6): refitting
 each component freely (offsets in units of the start's length), so that a wrong regression direction can be
 corrected. Benchmark, noise 0: gravity s1 / s2 unchanged (-28 % / -40 %), wind s1 -24 -> -27 %, wind s2 -10.4 ->
 -6.7 % (below the 10 % needed: a case lost), `none` s1 still none. Registered demo meshes with a hidden gravity

@@ -26,7 +26,7 @@ from .confirm import Trial
 
 @dataclass
 class Fold:
-    """One split: the sequences fitted on and held out, what trials are judged against (pipeline.judge_reference),
+    """One split: the sequences fitted on and held out, what trials are judged against (verdict.judge_reference),
     the candidates' trials and, for benchmarks, the trials of the candidates given the truth (`given`: the true
     effect, on its true region), which are never named."""
 
@@ -160,7 +160,7 @@ class CrossValidation:
 
     def residual_tie_break(self, ranked: list[str], evidence: list[str]) -> list[str]:
         """`ranked` with its first place given to the candidate the residual regression ranks higher (`evidence`,
-        in the regression's order; the diagnosis passes only what it selected, pipeline.named_first) where the
+        in the regression's order; the diagnosis passes only what it selected, verdict.named_first) where the
         folds do not separate that candidate from the rollouts' first.
 
         Why: rollouts judge how much a term helps, the one-step residual what pattern of force is missing, and

@@ -21,7 +21,7 @@ set from physics, not tuned on the benchmark:
   is no mis-set or tilted gravity (added in session 18 after a refit on registered meshes reached 146 m/s^2).
 
 Internal damping is not a candidate: every fabric has it, so the diagnosis baseline fits it with the material
-(pipeline.BASELINE_TERMS: Kelvin-Voigt, stiffness-proportional, its loss factor limited to that of a solid). As a
+(baseline.BASELINE_TERMS: Kelvin-Voigt, stiffness-proportional, its loss factor limited to that of a solid). As a
 candidate over an undamped baseline it was what every dissipative term stood in for on captures with nothing hidden
 (Blender's reference cloth damps its springs): held-out gains of 12-42 % with an 18x softer membrane.
 """
@@ -145,7 +145,7 @@ def applied(sim: ImplicitSimulator, change: ModelChange, region: np.ndarray | No
 @dataclass(frozen=True)
 class Form:
     """Another way a candidate's effect can enter the simulator, from the same regressed coefficients: trials refit
-    the candidate's own model and each form, and the training rollouts choose (pipeline._trial_in_best_form)."""
+    the candidate's own model and each form, and the training rollouts choose (starts.trial_in_best_form)."""
 
     label: str
     description: str

@@ -136,7 +136,7 @@ def identified_phrase(effect: dict) -> str:
 
 def unresolved_phrase(effect: dict) -> str:
     """Where confirmed effects of another class roll the recordings out about as well and the residual did not
-    choose between them (pipeline.unresolved): the recordings leave the class open."""
+    choose between them (verdict.unresolved): the recordings leave the class open."""
     others = effect.get("not_separated_from") or []
     if not others:
         return ""

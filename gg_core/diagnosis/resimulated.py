@@ -41,9 +41,9 @@ from ..physics.simulator import ClothState, ImplicitSimulator
 from ..physics.solver import SolverOptions
 from ..storage import write_json
 from ..synth.effects import GRAVITY, resolve_effect
+from .baseline import BASELINE_TERMS
 from .blender_units import truth_parameters, wind_push
 from .library import apply_region
-from .pipeline import BASELINE_TERMS
 
 # the re-simulated garment's material and damping: none is a start of the diagnosis's fits (material defaults,
 # margin starts 1x / 3x the default, loss factor 0.1); the proportions are those its baseline fitted on the

@@ -13,7 +13,7 @@ So the scan fits the candidate's field change on each pooling patch alone (the s
 re-adjustment as the selection), starts from the patch it explains best, and grows the region patch by
 neighbouring patch while one common change on the union explains at least GROWTH_SHARE more of the residual. A
 region that explains less than MIN_SHARE, or covers more than REGION_MAX_FRACTION of the garment, is no region.
-The scan proposes; held-out rollouts still decide (pipeline.confirmed).
+The scan proposes; held-out rollouts still decide (verdict.confirmed).
 
 Measured in the benchmark (noise 0, the pipeline's pooling): seed 1 found 19 vertices along the waist from the
 seam's top towards the back (4 on the seam; the seam pulls on the attached waistband there), and the trial gained

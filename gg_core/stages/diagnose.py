@@ -6,7 +6,7 @@ it through the force library, refit, and show the held-out rollout error before 
 1. Baseline: the behaviour fit with global parameters only (material, internal damping, contact margin;
    per-vertex fields could silently absorb a missing effect); rest state = the given rest mesh, else the first
    training frame bending towards flat (rest_state). Fits predict `fit_horizon` frames ahead of observed states
-   (pipeline.fit_config).
+   (baseline.fit_config).
 2. Residual: the one-frame position error of the simulator's own step on the training sequences, pooled in the
    weak form, after re-adjusting the global parameters to it (gg_core/diagnosis/residuals.py).
 3. Localization: per-vertex map, per-frame curve, their best-correlated state features, the standout region
@@ -17,7 +17,7 @@ it through the force library, refit, and show the held-out rollout error before 
 5. Confirmation: the selected candidates, then the others by the share of the residual they explain, up to
    `max_trials`, are each added to the simulator and refitted; one is confirmed only if the held-out rollout
    error drops by at least `min_gain` (and `min_gain_mm`) and the training sequences' free rollouts improve
-   too, each against the better of the baseline fit and its refit without candidates (pipeline.judge_reference);
+   too, each against the better of the baseline fit and its refit without candidates (verdict.judge_reference);
    the `fold_finalists` that gained most are refitted again with each training sequence held out in turn, and
    confirmed on the mean held-out gain over these folds (gg_core/diagnosis/folds.py); of the confirmed, the one
    whose smaller mean gain (training or held-out rollouts) is largest is accepted.
@@ -82,13 +82,13 @@ class DiagnoseRequest:
     baseline_iterations: int = 15      # L-BFGS iterations of the global baseline fit
     refit_iterations: int = 8          # of each confirming refit (warm-started)
     max_samples: int | None = 12       # observed states per fit evaluation ...
-    fit_horizon: int = 3               # ... each predicted this many frames ahead (pipeline.fit_config)
+    fit_horizon: int = 3               # ... each predicted this many frames ahead (baseline.fit_config)
     probe_acceleration: float = 0.5    # m/s^2: size of the model changes whose responses form the regression
     min_explained: float = 0.05        # share of the residual a selected candidate must explain
     min_inclusion: float = 0.5         # bootstrap inclusion probability a candidate needs to be tried
     min_gain: float = 0.10             # relative held-out rollout improvement needed to accept ...
     min_gain_mm: float = 0.25          # ... and absolute (below this the rollouts already match the recording;
-                                       # pipeline.confirmed says where it lies)
+                                       # verdict.confirmed says where it lies)
     max_trials: int = 12               # candidates refitted and judged on rollouts (12: every one that acts)
     fold_finalists: int = 3            # of those, the ones refitted again with each training sequence held out
     bootstrap: int = 100
@@ -161,7 +161,7 @@ def rest_state(req: DiagnoseRequest, first_frame: np.ndarray, mesh_log: dict) ->
     cloth without bending. On Blender's skirt (nothing hidden, seed 1) the baseline fit gives 7.8 mm held-out from
     the template against 9.4 mm from the first frame.
 
-    Why, without a rest mesh, the cloth bends towards flat (pipeline._baseline) and not towards the first frame's
+    Why, without a rest mesh, the cloth bends towards flat (baseline.fit_baseline) and not towards the first frame's
     folds: most of that 12.0 mm is the folds. On the same capture the true model rolls out 10.6 mm with the
     template's rest lengths and the first frame's dihedral angles, 4.2 mm with the first frame's lengths and the
     template's angles, and 4.5 mm with the first frame's lengths bending towards flat (the template's mean |angle|

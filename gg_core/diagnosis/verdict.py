@@ -1,0 +1,115 @@
+"""The rules that turn confirming refits into a verdict: what trials must beat, when a gain counts, which
+candidates are tried, named first, or left open beside the one named."""
+from __future__ import annotations
+
+from ..physics.cloth import Cloth
+from .confirm import Trial
+from .folds import CrossValidation
+from .library import BY_NAME
+from .selection import Selection
+
+# named_first: the share of bootstrap replicates in which a rival the folds do not separate from the rollouts' first
+# must explain more of the residual alone than it, where the selection chose neither (a one-sided paired test).
+# Measured (session 33, tilt against wind, 1000 replicates; the diagnosis draws 100): the demo capture's registered
+# meshes with a hidden tilt, nothing selected, 0.97 for the tilt (0.96 with the diagnosis's 100; with session 32's
+# trial starts, on main since session 34 (confirm.refit_or_scale, starts.lag_start), the rollouts led with wind by half
+# a point, the trials before them confirmed neither). Where the selection chose one: for the tilt Blender's s1 / s2
+# 0.79 / 1.0, our simulator's s2 at 1.5 mm 0.947, the demo capture's ground truth 0.997; Blender wind s1 0.90 for
+# wind, but Blender wind s2 0.87 for the tilt, a wrong pattern: short of 0.95 the residual's preference is no
+# evidence.
+RESIDUAL_PREFERENCE = 0.95
+
+
+def judge_reference(baseline: Trial, null_refit: Trial) -> Trial:
+    """What trials must beat: the better of the baseline fit and its refit without candidates, on held-out and on
+    training rollouts each (so a trial must beat both fits on both).
+
+    Why: the refit minimises a loss a few frames ahead, and now and then it worsens the free rollouts; then any
+    trial, whose extra freedom lets its refit end elsewhere, recovers that loss and seems to gain. Measured on the
+    benchmark at 1.5 mm noise (hidden rest-length change, seed 2): the refit worsened held-out 6.88 -> 8.41 mm,
+    every candidate then gained 10-15 % (wind, mass damping, air drag; the true rest-length term 10.7 % at a
+    refitted scale of 1.005, i.e. no change) and quadratic drag was named, a wrong class. Judged against the better
+    fit, no candidate passes there. Re-judging the other 24 stored benchmark reports (noise 0 and 1.5 mm) with this
+    rule changed no other verdict."""
+    return Trial([], min(baseline.heldout_l2, null_refit.heldout_l2), null_refit.train_loss,
+                 min(baseline.train_l2, null_refit.train_l2), start="better of the baseline fit and its refit")
+
+
+def confirmed(t: Trial, reference: Trial, min_gain: float, min_gain_mm: float) -> bool:
+    """The trial beats `reference` on held-out rollouts by the share `min_gain` and by `min_gain_mm`, and at all on
+    the training rollouts. The absolute floor matters where the baseline already matches: on a capture of our own
+    simulator with nothing hidden, a better-converged baseline refit reached 0.22 mm and anisotropy 'gained' 51 %
+    (0.11 mm); with its unloaded rest mesh given, `none` seed 2 reached 0.37 mm and body friction 'gained' 10.3 %
+    (0.04 mm). The smallest right gain seen is 0.35 mm (-27 %: hidden friction there, rest given, mu refitted to
+    1.0 against 1.05), which the former floor of 0.5 mm refused; the default 0.25 mm lies between. Over the 44
+    stored benchmark reports at noise 0 (/work/data/s21/floor_scan.py) it changes that verdict and no other: the
+    floor only binds where the reference is under 5 mm, and wrong-class gains on `none` captures were either
+    under 0.25 mm or under 8 %."""
+    needed = min((1.0 - min_gain) * reference.heldout_l2, reference.heldout_l2 - 1e-3 * min_gain_mm)
+    return t.heldout_l2 <= needed and t.train_l2 < reference.train_l2
+
+
+def implausible(t: Trial, cloth: Cloth) -> str | None:
+    """Why the trial's refitted values are not cloth physics (Candidate.implausible), or None."""
+    return next((why for why in (BY_NAME[n].implausible(t.values, cloth) for n in t.names) if why), None)
+
+
+def selected(sel: Selection, min_inclusion: float) -> list[str]:
+    """The candidates the forward selection chose with bootstrap inclusion >= `min_inclusion`."""
+    return [n for n in sel.order if sel.inclusion[n] >= min_inclusion]
+
+
+def named_first(cv: CrossValidation, by_rollouts: list[str], sel: Selection, min_inclusion: float) -> list[str]:
+    """The confirmed candidates `by_rollouts` in the order they are accepted: the residual breaks a tie the folds
+    leave (CrossValidation.residual_tie_break), but only with a candidate its forward selection chose with bootstrap
+    inclusion >= `min_inclusion`, the bar a candidate's residual evidence must clear to be tried first (propose).
+
+    Why not every candidate in the regression's order: where the selection is unstable its order is a coin toss.
+    Measured (session 28, our simulator's hidden gravity tilt, seed 2, 1.5 mm noise): the selection took wind
+    (inclusion 0.4, 7.4 % of the residual explained) over the tilt (0.3, 7.1 %); the tilt led the rollouts (mean
+    held-out gain 36 % against 25 %, better in 2 folds by 18 and 16 points, worse in the walk-less fold by 10),
+    and breaking that tie with the explained share named wind, a wrong class. The case the tie-break was made for
+    (Blender's hidden wind, seed 2) had wind selected in 100 % of the bootstrap replicates, the tilt in 5 %.
+
+    Where the selection chose neither the rollouts' first nor a rival the folds do not separate from it, the rival
+    still comes first if it explains more of the residual alone in at least RESIDUAL_PREFERENCE of the bootstrap
+    replicates (Selection.preference): registration error lowers every candidate's share below the selection's
+    bar together, the paired comparison keeps which pattern fits better. See RESIDUAL_PREFERENCE."""
+    chosen = selected(sel, min_inclusion)
+    ranked = cv.residual_tie_break(by_rollouts, chosen)
+    if not ranked or ranked[0] != by_rollouts[0] or ranked[0] in chosen:
+        return ranked
+    lead = ranked[0]
+    rivals = [n for n in ranked[1:] if not cv.separated(lead, n) and sel.preference(n, lead) >= RESIDUAL_PREFERENCE]
+    if not rivals:
+        return ranked
+    first = max(rivals, key=lambda n: sel.preference(n, lead))
+    return [first] + [n for n in ranked if n != first]
+
+
+def unresolved(cv: CrossValidation, passing: list[str]) -> list[str]:
+    """The confirmed candidates of other equivalence classes than the first of `passing` that the folds do not
+    separate from it (CrossValidation.separated): where neither the rollouts nor the residual chose, the report
+    says the recordings leave the class open instead of naming one as if it were certain."""
+    if not passing:
+        return []
+    lead = BY_NAME[passing[0]]
+    return [n for n in passing[1:] if BY_NAME[n].equivalence != lead.equivalence and not cv.separated(lead.name, n)]
+
+
+def propose(sel: Selection, min_inclusion: float, max_trials: int) -> list[str]:
+    """At most `max_trials` candidates worth a refit: those the forward selection chose with bootstrap inclusion
+    >= `min_inclusion`, then the others by the share of the residual they explain alone.
+
+    The regression on one-frame errors only ranks: against a simulator that differs from the recording's in
+    many small ways (Blender's mass-spring cloth vs our StVK on the benchmark), the true effect often explains
+    less of the residual than a wrong one (measured: mass damping 0.057 vs strain-rate damping 0.125 on a capture
+    with hidden air drag, yet 61 % vs 25 % held-out gain; a horizontal gravity tilt 4th of 6). Held-out
+    rollouts decide. With noise even the sign can mislead: on a noisy capture with hidden air damping, mass
+    damping explained nothing of the smoothed residual and gained 64 % held-out. Starting such a trial at its probe
+    size instead (as reference trials do) named air damping s2 at 1.5 mm noise right (-26 %), but also linear
+    damping on `none` captures (bench s2 at 1.5 mm, -18 %; the tiny test captures, -82 %): so both starts are
+    refitted and the training rollouts choose (starts.trial_from_starts)."""
+    chosen = selected(sel, min_inclusion)
+    others = sorted((n for n in sel.explained if n not in chosen), key=lambda n: -sel.explained[n])
+    return (chosen + others)[:max_trials]
