@@ -144,7 +144,10 @@ def test_blender_gravity_tilt_is_named(blender_capture, tmp_path):
                                                      **BLENDER_TILT)).read_text())
     assert report["accepted_classes"][:1] == ["gravity"]
     folds = report["cross_validation"]["candidates"]
-    assert folds["gravity_offset"]["folds"] == folds["wind"]["folds"] == 3    # the rival was cross-validated too
+    # the best rival was cross-validated too: wind with torch's default threads, anisotropic stretch with one
+    # thread (session 48: 18.1 % against wind's 17.7 % on the training rollouts, a tie the thread count breaks)
+    rivals = [n for n, c in folds.items() if n != "gravity_offset" and c["folds"] == 3]
+    assert folds["gravity_offset"]["folds"] == 3 and len(rivals) == BLENDER_TILT["fold_finalists"] - 1
     assert report["heldout_l2_after"] < 0.9 * report["heldout_l2_before"]
     effect = next(e for e in report["effects"] if e["name"] == report["accepted"][0])
     for fit in ("refit", "refit_all_recordings"):      # the split's fit and the one on every recording (final_fit)
