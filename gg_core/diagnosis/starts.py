@@ -66,7 +66,6 @@ def regressed(cand: Candidate, ctx: Context, r: Measured, probes: list[tuple[flo
                BY_NAME).coefs[cand.name]
 
 
-
 def trial_from_starts(cand: Candidate, coefs: np.ndarray, sim: ImplicitSimulator, ctx: Context,
                       train: list[Observed], heldout: list[Observed], attached: np.ndarray, config: FitConfig,
                       acceleration: float, lag: np.ndarray | None) -> Trial:
