@@ -1,5 +1,3 @@
-import time
-
 import numpy as np
 import pytest
 import trimesh
@@ -82,11 +80,11 @@ def test_surface_metrics_partial_prediction_lowers_recall_only():
     assert m["cd_cm"] > 3.0
 
 
-def test_surface_metrics_speed_20k_samples_vs_3k_vertex_mesh():
+def test_point_to_mesh_is_exact_at_the_stages_scale():
+    """The pruned search (4 nearest centroids, then radius-grouped balls) against brute force where evaluation runs:
+    a 2562-vertex mesh and a noisy copy's surface samples. Its speed is not a test's business (wall clock)."""
     v, f = _sphere(0.3, 4)                          # 2562 vertices, 5120 faces
     rng = np.random.default_rng(0)
     pred = v + rng.normal(scale=0.004, size=v.shape)
-    surface_metrics(pred, f, v, f, n_samples=2000)  # warm-up
-    t = time.perf_counter()
-    surface_metrics(pred, f, v, f)
-    assert time.perf_counter() - t < 3.0           # < 1 s on an idle core; margin for a loaded test machine
+    points = sample_surface(pred, f, 400, rng)
+    np.testing.assert_allclose(point_to_mesh(points, v, f), _brute_force(points, v, f), rtol=0, atol=1e-12)

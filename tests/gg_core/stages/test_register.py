@@ -6,7 +6,6 @@ ground truth is read by the report's metrics alone.
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 import pytest
@@ -69,16 +68,18 @@ def test_outputs_keep_the_template_topology_and_score_against_ground_truth(full,
     assert seq["alignment"]["mode"] == "body" and seq["alignment"]["from"] == "00_walk/000000"
 
 
-def test_rerun_keeps_unchanged_frames_and_refits_after_a_change(full, tiny_capture, stage1):
+def test_rerun_keeps_unchanged_frames_and_refits_after_a_change(full, tiny_capture, stage1, monkeypatch):
+    from gg_core.registration.tracker import Tracker
+
     project, report_path = full
     meshes = [m for sub in ("fit", "refined", "meshes")
               for m in sorted((project / "stage2" / "00_walk" / sub).glob("*.ply"))]
     assert len(meshes) == 3 * FRAMES
     stamps = [m.stat().st_mtime_ns for m in meshes]
-    start = time.perf_counter()
-    register(tiny_capture, stage1, project)
+    with monkeypatch.context() as patch:                   # metrics and renders only, no fitting
+        patch.setattr(Tracker, "fit_frame", lambda *a, **k: pytest.fail("an unchanged frame was fitted again"))
+        register(tiny_capture, stage1, project)
     assert [m.stat().st_mtime_ns for m in meshes] == stamps
-    assert time.perf_counter() - start < 60              # metrics and renders only, no fitting
     # a different option invalidates every frame (each frame's key chains the previous one's)
     register(tiny_capture, stage1, project, seed=1)
     assert all(m.stat().st_mtime_ns != s for m, s in zip(meshes, stamps))
