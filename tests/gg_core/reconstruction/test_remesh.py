@@ -49,7 +49,8 @@ def test_coarsen_thins_the_border_too_and_stays_on_the_surface():
     inner = np.setdiff1d(np.arange(len(v)), border)
     edge = edge_length_for(2 * np.pi * 0.25 * 0.5, 500)
     # the remesher projects onto the border-collapsed input, whose border chords cut inside the tube: the ring next
-    # to the border inherits part of their sag (0.103 edge at worst on an AMD EPYC, under 0.1 on other machines)
+    # to the border inherits part of their sag (0.103 edge at worst on this project's AMD EPYC machine, under 0.1
+    # on the machines of earlier sessions)
     from_border = np.minimum(v[:, 1], 0.5 - v[:, 1])[inner]
     interior, first_ring = inner[from_border > edge], inner[from_border <= edge]
     assert np.median(radial[inner]) < 0.001 and radial[interior].max() < 0.1 * edge   # on the tube

@@ -67,15 +67,13 @@ def test_rerun_skips_and_appearance_change_keeps_the_mesh(template_project, monk
     req, report_path = template_project
     obj = req.project / "stage1" / "template.obj"
     before = (report_path.stat().st_mtime_ns, obj.stat().st_mtime_ns)
+    monkeypatch.setattr(template_mesh, "reconstruct_template", lambda *a, **k: pytest.fail("geometry rebuilt"))
     with monkeypatch.context() as patch:
-        patch.setattr(template_mesh, "reconstruct_template", lambda *a, **k: pytest.fail("geometry rebuilt"))
         patch.setattr(appearance, "fit_appearance", lambda *a, **k: pytest.fail("appearance refitted"))
         assert run_template(req) == report_path
     assert (report_path.stat().st_mtime_ns, obj.stat().st_mtime_ns) == before
-    with monkeypatch.context() as patch:                   # geometry reused
-        patch.setattr(template_mesh, "reconstruct_template", lambda *a, **k: pytest.fail("geometry rebuilt"))
-        req2 = TemplateRequest(capture=req.capture, project=req.project, appearance_iterations=5, progress="none")
-        report = json.loads(run_template(req2).read_text())
+    req2 = TemplateRequest(capture=req.capture, project=req.project, appearance_iterations=5, progress="none")
+    report = json.loads(run_template(req2).read_text())
     assert obj.stat().st_mtime_ns == before[1]             # geometry reused
     assert report["appearance"]["iterations"] == 5 and report["inputs"]["options"]["appearance_iterations"] == 5
 
