@@ -132,8 +132,9 @@ def blender_capture(tmp_path_factory):
 # other three gained -8 to +1.4 % held out when all seven were trialled). Measured alone, 2 cores (session 51,
 # `pytest -k blender --durations`): tilt 650 s with three trials (baseline 95 s, trials 176 s, folds 283 s, joint and
 # final fit 66 s), `none` 426 s with seven (trials 314 s); inside the 22-minute suite 1032 / 735 s, its critical
-# path; with these trials 876 / 353 s in a 17-minute suite. Not cheaper by a coarser skirt: at ~300 vertices (336) the `none` capture gives a false alarm, anisotropic
-# stretch accepted at -19.7 % held out (-13.6 % over the folds), where at 429 vertices it loses 19.6 %.
+# path; with these trials 876 / 353 s in a 17-minute suite. Not cheaper by a coarser skirt: at ~300 vertices
+# (336) the `none` capture gives a false alarm, anisotropic stretch accepted at -19.7 % held out (-13.6 % over the
+# folds), where at 429 vertices it loses 19.6 %.
 BLENDER = {"baseline_iterations": 10, "refit_iterations": 4, "bootstrap": 40, "progress": "none"}
 BLENDER_TILT = {**BLENDER, "max_trials": 2, "fold_finalists": 2}
 BLENDER_NONE = {**BLENDER, "max_trials": 4}
