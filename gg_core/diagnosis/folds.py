@@ -112,18 +112,25 @@ class CrossValidation:
 
     def confirmed(self, name: str, min_gain: float, min_gain_mm: float) -> bool:
         """Trialled in every fold; the mean held-out gain at least `min_gain` and the mean improvement at least
-        `min_gain_mm`; the held-out rollouts better in most folds and the training rollouts in every fold.
+        `min_gain_mm`; the held-out rollouts better in most folds (every fold, by half of `min_gain`, with fewer
+        than three) and the training rollouts in every fold.
 
         Why most and not every held-out fold: a recording that barely exercises the effect does not show it.
         Measured (session 24, our simulator's hidden air damping, seed 2): mass damping gained -2 / +28 / +42 %
         held out on the arm swing / walk / torso twist, where the true effect itself gains -2 % on the arm swing;
         on Blender's capture with nothing hidden (seed 1), where the arm swing alone had come within 0.5 points of
-        a false alarm, it gained +9.5 / -19 / +7 %: a mean of -1 %."""
+        a false alarm, it gained +9.5 / -19 / +7 %: a mean of -1 %.
+
+        With fewer than three folds "most" is every fold, and a fold counts only if it gains half of `min_gain`:
+        a hair above zero is no evidence. Measured (session 51, `make demo`'s tiny capture with nothing hidden,
+        two recordings): body friction gained 21.4 % without the arm swing and almost nothing without the walk
+        (4.8 -> 4.8 mm), a mean of 10.7 %, and was accepted: a false alarm."""
         if not self.complete(name):
             return False
         g = self.per_fold(name)
+        most = (g[:, 0] >= 0.5 * min_gain).all() if len(g) < 3 else 2 * (g[:, 0] > 0).sum() > len(g)
         return bool(g[:, 0].mean() >= min_gain and g[:, 2].mean() >= 1e-3 * min_gain_mm
-                    and 2 * (g[:, 0] > 0).sum() > len(g) and (g[:, 1] > 0).all())
+                    and most and (g[:, 1] > 0).all())
 
     def ranked(self, passing: list[str]) -> list[str]:
         """Confirmed candidates in the order they are accepted: by the smaller of their mean gains on training and

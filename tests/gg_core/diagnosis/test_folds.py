@@ -48,6 +48,20 @@ def test_confirmation_is_on_the_mean_heldout_gain_with_most_folds_improving():
     assert not none.confirmed("x", 0.10, 0.25)
 
 
+def test_with_two_folds_every_fold_must_gain_half_the_threshold():
+    # make demo's tiny capture with nothing hidden (session 51): body friction 21.4 % / 0.1 %, a mean of 10.7 %
+    demo = CrossValidation([fold("arm", (0.00418, 0.00538), x=(0.003285, 0.00487)),
+                            fold("walk", (0.00480, 0.00520), x=(0.004795, 0.00520 * 0.999))])
+    assert demo.mean_gains("x")[0] > 0.10 and not demo.confirmed("x", 0.10, 0.25)
+    both = CrossValidation([fold("arm", (0.010, 0.010), x=(0.0080, 0.009)),
+                            fold("walk", (0.010, 0.010), x=(0.0094, 0.009))])   # 20 % and 6 %: both at least 5 %
+    assert both.confirmed("x", 0.10, 0.25)
+    three = CrossValidation([fold("arm", (0.010, 0.010), x=(0.0070, 0.009)),
+                             fold("walk", (0.010, 0.010), x=(0.0099, 0.009)),
+                             fold("twist", (0.010, 0.010), x=(0.0080, 0.009))])   # 1 % in one of three: still most
+    assert three.confirmed("x", 0.10, 0.25)
+
+
 def test_a_candidate_missing_from_a_fold_is_not_confirmed_and_one_fold_is_the_given_split():
     cv = CrossValidation([fold("arm", (0.010, 0.010), air=(0.0080, 0.0080), tilt=(0.0070, 0.0090)),
                           fold("walk", (0.010, 0.010), air=(0.0080, 0.0080))])
