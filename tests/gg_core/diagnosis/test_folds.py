@@ -49,7 +49,7 @@ def test_confirmation_is_on_the_mean_heldout_gain_with_most_folds_improving():
 
 
 def test_with_two_folds_every_fold_must_gain_half_the_threshold():
-    # make demo's tiny capture with nothing hidden (session 51): body friction 21.4 % / 0.1 %, a mean of 10.7 %
+    # make demo's tiny capture with nothing hidden (session 51): body friction 21.4 % / 0.03 %, a mean of 10.7 %
     demo = CrossValidation([fold("arm", (0.00418, 0.00538), x=(0.003285, 0.00487)),
                             fold("walk", (0.00480, 0.00520), x=(0.004795, 0.00520 * 0.999))])
     assert demo.mean_gains("x")[0] > 0.10 and not demo.confirmed("x", 0.10, 0.25)
