@@ -13,6 +13,7 @@ from PIL import Image, ImageDraw
 
 from ..storage import atomic_path
 from .blender_units import offset_tilt
+from .selection import MIN_BOOTSTRAP_BLOCKS
 
 # black-body ramp: dark purple -> red -> orange -> pale yellow (low -> high residual)
 _RAMP = np.array([[40, 20, 70], [150, 30, 70], [230, 90, 40], [250, 190, 60], [255, 250, 200]], np.float64)
@@ -216,13 +217,14 @@ def write_html(path: Path, report: dict, vertices: np.ndarray, faces: np.ndarray
     loc = report["localization"]
     rows = "".join(
         f"<tr><td>{html.escape(e['name'])}</td><td>{html.escape(e['class'])}</td><td>{e['evidence']['explained']:.1%}"
-        f"</td><td>{e['uncertainty']['inclusion_probability']:.0%}</td><td>{html.escape(_fmt_params(e))}</td>"
+        f"</td><td>{_share(e['uncertainty']['inclusion_probability'])}</td><td>{html.escape(_fmt_params(e))}</td>"
         f"<td>{_pct(e.get('heldout_gain'))}</td><td>{_pct(e.get('train_rollout_gain'))}</td>"
         f"<td>{_pct((e.get('cross_validated') or {}).get('heldout_gain'))}</td>"
         f"<td>{html.escape(e.get('implausible') or '')}</td></tr>"
         for e in report["effects"])
     withheld = "".join(f"<p>Not tried: {html.escape(n)}, {html.escape(why)}.</p>"
                        for n, why in report.get("withheld_candidates", {}).items())
+    withheld += bootstrap_sentence(report.get("selection", {}))
     page = f"""<!doctype html><html><head><meta charset="utf-8"><title>Missing-physics diagnosis</title>
 <style>body{{font-family:sans-serif;max-width:980px;margin:2em auto}}
 td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc}}</style></head><body>
@@ -286,6 +288,21 @@ def _baseline_paragraph(baseline: dict) -> str:
 
 def _pct(gain: float | None) -> str:
     return "" if gain is None else format(gain, "+.0%")
+
+
+def _share(value: float | None) -> str:
+    return "n/a" if value is None else format(value, ".0%")
+
+
+def bootstrap_sentence(selection: dict) -> str:
+    """Why the candidate table has no bootstrap inclusion, where it has none."""
+    if selection.get("bootstrap_resampled", True):
+        return ""
+    blocks = selection.get("bootstrap_blocks", 0)
+    return (f"<p>Bootstrap inclusion and intervals not estimable: the training recordings give {blocks} resampling "
+            f"block{'s' if blocks != 1 else ''} of consecutive time windows, and a block bootstrap needs at least "
+            f"{MIN_BOOTSTRAP_BLOCKS} (more or longer training recordings); the regression then breaks no tie between "
+            f"candidates the held-out rollouts leave open.</p>")
 
 
 def _fmt_params(effect: dict) -> str:

@@ -83,7 +83,8 @@ class Result:
     def effects(self) -> list[dict]:
         sel = self.selection
         order = {n: i for i, n in enumerate(sel.order)}
-        names = sorted(sel.explained, key=lambda n: (order.get(n, len(order)), -sel.inclusion[n], -sel.explained[n]))
+        names = sorted(sel.explained, key=lambda n: (order.get(n, len(order)), -np.nan_to_num(sel.inclusion[n]),
+                                                     -sel.explained[n]))
         out = []
         for n in names:
             cand = BY_NAME[n]
@@ -95,9 +96,9 @@ class Result:
                 "params": cand.params(sel.coefs[n]),
                 "refit": None if t is None else t.values,
                 "refit_all_recordings": self.final.values if self.final is not None and n in self.accepted else None,
-                "uncertainty": {"inclusion_probability": sel.inclusion[n],
+                "uncertainty": {"inclusion_probability": sel.inclusion[n] if sel.resampled else None,
                                 "interval_5_95": {c: sel.interval[n][k].tolist()
-                                                  for k, c in enumerate(cand.coefficients)},
+                                                  for k, c in enumerate(cand.coefficients)} if sel.resampled else None,
                                 "delivered_ranges": {k: {"factors": p["range_factors"],
                                                          "grid": [p["factors"][0], p["factors"][-1]],
                                                          "tolerance": p["tolerance"]}
@@ -140,7 +141,8 @@ class Result:
                 "starts_train_rollout_l2": self.final.compared, "identified_ranges": self.final.identified},
             "baseline": self.baseline,
             "nuisance_adjustment": self.nuisance,
-            "selection": {"order": self.selection.order, "rss_after_nuisance": self.selection.rss_nuisance},
+            "selection": {"order": self.selection.order, "rss_after_nuisance": self.selection.rss_nuisance,
+                          "bootstrap_blocks": self.selection.blocks, "bootstrap_resampled": self.selection.resampled},
             "localization": {"vertex_feature": {"name": loc.vertex_feature[0], "spearman": loc.vertex_feature[1],
                                                 "meaning": FEATURES.get(loc.vertex_feature[0], "")},
                              "step_feature": {"name": loc.step_feature[0], "spearman": loc.step_feature[1],

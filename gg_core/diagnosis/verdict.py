@@ -55,7 +55,8 @@ def implausible(t: Trial, cloth: Cloth) -> str | None:
 
 
 def selected(sel: Selection, min_inclusion: float) -> list[str]:
-    """The candidates the forward selection chose with bootstrap inclusion >= `min_inclusion`."""
+    """The candidates the forward selection chose with bootstrap inclusion >= `min_inclusion`; none where the
+    bootstrap could not resample (Selection.resampled): a choice whose stability is unknown breaks no tie."""
     return [n for n in sel.order if sel.inclusion[n] >= min_inclusion]
 
 

@@ -104,3 +104,18 @@ def testregion_sentence_says_where_each_region_candidate_acted():
     assert "heavy_region scanned the garment patch by patch: no patch explains enough of the residual (best 1.0 %)" \
         in text
     assert region_sentence({}).startswith("No garment region stood out in the maps")
+
+
+def test_the_page_says_when_the_bootstrap_could_not_resample(tmp_path):
+    v, f = sheet(4, 4, 0.5, 0.5)
+    effect = {**EFFECT, "uncertainty": {"inclusion_probability": None, "interval_5_95": None}}
+    report = {"verdict": "none", "accepted": [], "effects": [effect], "heldout_l2_before": 0.012,
+              "heldout_l2_after": 0.012, "outputs": {}, "baseline": {"density": 0.2},
+              "selection": {"order": [], "bootstrap_blocks": 1, "bootstrap_resampled": False},
+              "localization": {"vertex_feature": {"name": "height", "spearman": 0.5, "meaning": "height"},
+                               "step_feature": {"name": "speed", "spearman": 0.4, "meaning": "speed |v|"}}}
+    page = write_html(tmp_path / "d.html", report, v, f, np.linspace(0, 1, len(v))).read_text()
+    assert "<td>n/a</td>" in page
+    assert "training recordings give 1 resampling block of consecutive time windows" in page
+    report["selection"]["bootstrap_resampled"] = True
+    assert "not estimable" not in write_html(tmp_path / "e.html", report, v, f, np.linspace(0, 1, len(v))).read_text()

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from gg_core.diagnosis.library import BY_NAME
-from gg_core.diagnosis.selection import Design, Selection, fit, forward, gram, select
+from gg_core.diagnosis.selection import MIN_BOOTSTRAP_BLOCKS, Design, Selection, fit, forward, gram, select
+from gg_core.diagnosis.verdict import selected
 
 
 def design(effects: dict[str, np.ndarray], rows: int = 1200, noise: float = 1.0, seed: int = 0) -> Design:
@@ -67,3 +68,17 @@ def test_paired_bootstrap_prefers_the_true_pattern_where_neither_share_clears_th
     assert sel.preference("gravity_offset", "wind") >= 0.95 and sel.preference("wind", "gravity_offset") <= 0.05
     assert sel.preference("air_drag", "wind") < 0.5                  # explains nothing: never ahead
     assert Selection(1.0, [], {}, {}, {}).preference("wind", "air_drag") == 0.5   # no replicates, no preference
+
+
+def test_too_few_blocks_leave_the_uncertainty_unknown_not_certain():
+    # one training recording of 8 frames is one block: every replicate would be the data itself
+    d = design({"mass_damping": np.array([0.8])})
+    few = Design(d.y, d.nuisance, d.blocks, np.repeat(np.arange(MIN_BOOTSTRAP_BLOCKS - 1), 400))
+    sel = select(few, BY_NAME, min_gain=0.05, n_boot=40)
+    assert sel.order == ["mass_damping"] and sel.coefs["mass_damping"] == pytest.approx([0.8], abs=0.1)
+    assert not sel.resampled and sel.blocks == MIN_BOOTSTRAP_BLOCKS - 1
+    assert np.isnan(sel.inclusion["mass_damping"]) and np.isnan(sel.interval["mass_damping"]).all()
+    assert sel.preference("mass_damping", "wind") == 0.5
+    assert selected(sel, 0.5) == []                    # an unknown stability breaks no tie
+    enough = select(design({"mass_damping": np.array([0.8])}), BY_NAME, min_gain=0.05, n_boot=40)
+    assert enough.resampled and enough.blocks == 12 and selected(enough, 0.5) == ["mass_damping"]
