@@ -296,7 +296,9 @@ def summary(report: dict) -> str:
     (verdict.unresolved), and the delivered values the recordings do not fix at all (identify.profiles: every
     multiple profiled rolls out about as well), which a user should not read as measured."""
     if report.get("verdict") != "missing":
-        return "Nothing missing: the simulator explains the recordings"
+        loaded = "; rest state a loaded frame, a steady load may hide in it" if report.get("rest_mesh_given") is False \
+            else ""
+        return f"Nothing missing: the simulator explains the recordings{loaded}"
     accepted = report.get("accepted", [])
     if len(accepted) > 1 and report.get("heldout_gain") is not None:
         return f"Missing physics: {' + '.join(accepted)} (held-out error {-report['heldout_gain']:+.0%} together)"

@@ -175,7 +175,12 @@ def rest_state(req: DiagnoseRequest, first_frame: np.ndarray, mesh_log: dict) ->
     material the held-out rollout went 4.5 -> 3.5 mm (walk 4.3 -> 3.9, torso twist 4.9 -> 4.9 mm; the template's
     lengths: 0.2-0.9 mm), the solved lengths correlate 0.33 with the template's (log-ratio sd 0.17 % against the
     truth's 0.51 %): one loaded frame does not determine them (about as many balance equations as edges, and the
-    frame is not at rest: with the true rest state its force residual is 0.15 of the vertex weights rms)."""
+    frame is not at rest: with the true rest state its force residual is 0.15 of the vertex weights rms).
+
+    What a loaded rest state hides (session 53): a load present in every frame is partly taken into it. Blender's
+    hidden wind on `gg synth --preset tiny --effect wind` (2 recordings x 8 frames, 5 steps) was answered none from
+    the first frame (wind +5.1 % held out, 4.14 mm baseline) and named from the unloaded template (wind -13.8 % held
+    out, -16.2 % over the folds, 2.94 mm baseline); so the report says so where it answers none without one."""
     if not req.rest_mesh:
         return first_frame
     if mesh_log["remeshed"]:
@@ -274,6 +279,7 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
         "noise_mm": req.noise_mm, "denoising": denoised.to_json(), "vertices": len(train[0].garment[0]),
         "simulation_mesh": mesh_log, "attached_vertices": int(inputs.attached.sum()),
         "rest_state": req.rest_mesh or f"first frame of {train_names[0]}, bending towards flat",
+        "rest_mesh_given": bool(req.rest_mesh),
         "outputs": {"residual_vertex": str(out / "residual_vertex.npy"),
                     "residual_vertex_unit": "m/s^2 (one-frame position error over the frame time squared)",
                     "activity_vertex": str(out / "activity_vertex.npy"),

@@ -207,7 +207,11 @@ def test_nothing_missing_is_said_plainly(blender, tmp_path):
     _write_diagnosis(tmp_path, {"verdict": "none", "accepted": []}, np.zeros(4))
     blender.context.scene.gg.project_path = str(tmp_path)
     assert blender.ops.gg.show_residuals() == {"FINISHED"}
-    assert blender.context.scene.gg.diagnosis.startswith("Nothing missing")
+    assert blender.context.scene.gg.diagnosis == "Nothing missing: the simulator explains the recordings"
+    _write_diagnosis(tmp_path / "loaded", {"verdict": "none", "accepted": [], "rest_mesh_given": False}, np.zeros(4))
+    blender.context.scene.gg.project_path = str(tmp_path / "loaded")
+    assert blender.ops.gg.show_residuals() == {"FINISHED"}
+    assert blender.context.scene.gg.diagnosis.endswith("rest state a loaded frame, a steady load may hide in it")
 
 
 @pytest.mark.parametrize("operator", ["reconstruct_template", "register_sequences", "fit_behavior",
