@@ -131,12 +131,13 @@ class Selection:
     interval: dict[str, np.ndarray] = field(default_factory=dict)   # [K,2] 5th / 95th bootstrap percentiles
     shares: dict[str, np.ndarray] = field(default_factory=dict)     # [B] `explained` in each bootstrap replicate
     blocks: int = 0                                      # resampling blocks the replicates were drawn from
+    replicates: int = 0                                  # bootstrap replicates drawn
 
     @property
     def resampled(self) -> bool:
         """Whether the bootstrap ran: with fewer than MIN_BOOTSTRAP_BLOCKS blocks (or no replicates asked for) the
         inclusion probabilities and intervals are unknown (NaN), not certain."""
-        return bool(self.shares)
+        return self.replicates > 0
 
     def preference(self, first: str, other: str) -> float:
         """Share of the bootstrap replicates in which `first` alone explains more of the residual than `other`
@@ -185,6 +186,7 @@ def select(design: Design, candidates: dict[str, Candidate], min_gain: float, n_
             draws[n].append(beside.coefs[n])
             own = beside if context[n] == [n] else fit(sample, [n], candidates)
             shares[n].append(explained_share(own.rss, nuisance_rss))
+    sel.replicates = n_boot
     sel.shares = {n: np.array(v) for n, v in shares.items()}
     sel.inclusion = {n: hits[n] / n_boot for n in design.blocks}
     sel.interval = {n: np.percentile(np.stack(d), [5, 95], axis=0).T for n, d in draws.items()}
