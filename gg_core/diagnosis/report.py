@@ -289,7 +289,8 @@ def _baseline_paragraph(baseline: dict) -> str:
 
 
 # Measured (session 53): `gg synth --preset tiny --effect wind` (2 recordings x 8 frames) is answered none with the
-# first frame as rest state (wind +5.1 % held out) and wind with the unloaded template given (-16.2 % over the folds).
+# first frame as rest state (wind +5.1 % held out) and wind with the unloaded template given (-16.2 % over the folds);
+# on seed 2 it stays none either way (wind +3.2 / +13.6 % over the two folds with the template).
 LOADED_REST_CAVEAT = (
     "The rest state was the first training frame, a garment already loaded: a load present in every frame (a steady "
     "wind, tilted gravity) is partly taken into it, and on short recordings that can hide it. Where the unloaded "

@@ -180,7 +180,8 @@ def rest_state(req: DiagnoseRequest, first_frame: np.ndarray, mesh_log: dict) ->
     What a loaded rest state hides (session 53): a load present in every frame is partly taken into it. Blender's
     hidden wind on `gg synth --preset tiny --effect wind` (2 recordings x 8 frames, 5 steps) was answered none from
     the first frame (wind +5.1 % held out, 4.14 mm baseline) and named from the unloaded template (wind -13.8 % held
-    out, -16.2 % over the folds, 2.94 mm baseline); so the report says so where it answers none without one."""
+    out, -16.2 % over the folds, 2.94 mm baseline); on seed 2 the template did not suffice (wind +3.2 / +13.6 % over
+    the two folds, a mean under min_gain). So the report says so where it answers none without one."""
     if not req.rest_mesh:
         return first_frame
     if mesh_log["remeshed"]:
