@@ -24,11 +24,12 @@ from .library import Candidate
 # The fewest resampling blocks a bootstrap replicate is drawn from. With one block every replicate is the data
 # itself: each selected candidate is "included" in 100 % of them, intervals have zero width and one candidate
 # "explains more than another" in 100 % (measured, session 53: the two-recording tiny captures of `gg synth --preset
-# tiny` train on one recording of 8 frames, one block of two windows, and session 52 named wind over mass damping on
-# such a capture by a residual preference of 1.0). With three blocks the replicates take at most 10 distinct
-# values. Four is what the suite's smallest diagnosed captures have (2 training recordings x 16 frames); the
-# benchmark's (2 x 24) have eight.
+# tiny` train on one recording of 8 frames: 6 steps, one 6-frame window, one block; session 52 named wind over mass
+# damping on such a capture by a residual preference of 1.0). With three blocks the replicates take at most 10
+# distinct values. Four is what the suite's smallest diagnosed captures have (2 training recordings x 16 frames);
+# the benchmark's (2 x 24) have eight.
 MIN_BOOTSTRAP_BLOCKS = 4
+
 
 @dataclass
 class Design:
