@@ -294,11 +294,15 @@ def summary(report: dict) -> str:
     (library.Form), and the candidate it was chosen over where the rollouts tied
     (folds.CrossValidation.residual_tie_break) or, where nothing chose, the rivals it was not told from
     (verdict.unresolved), and the delivered values the recordings do not fix at all (identify.profiles: every
-    multiple profiled rolls out about as well), which a user should not read as measured."""
+    multiple profiled rolls out about as well), which a user should not read as measured. A `none` names the
+    candidate that came closest where it lowered the held-out error at all (verdict.closest): weak evidence."""
     if report.get("verdict") != "missing":
         loaded = "; rest state a loaded frame, a steady load may hide in it" if report.get("rest_mesh_given") is False \
             else ""
-        return f"Nothing missing: the simulator explains the recordings{loaded}"
+        near = report.get("closest") or {}
+        closest = f"; closest: {near['name']} (held-out error {-near['heldout_gain']:+.1%}, not enough to name it)" \
+            if near.get("heldout_gain", 0.0) > 0 else ""
+        return f"Nothing missing: the simulator explains the recordings{closest}{loaded}"
     accepted = report.get("accepted", [])
     if len(accepted) > 1 and report.get("heldout_gain") is not None:
         return f"Missing physics: {' + '.join(accepted)} (held-out error {-report['heldout_gain']:+.0%} together)"

@@ -307,6 +307,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         "rollouts_first": report.get("cross_validation", {}).get("rollouts_first"),   # where the residual overruled
         "not_separated_from": accepted.get("not_separated_from", []) if accepted else [],   # the class left open
         "implausible": [e["name"] for e in report["effects"] if e.get("implausible")],
+        "closest": report.get("closest"),     # where nothing was named: the near miss and why (verdict.closest)
         "heldout_l2_before": before, "heldout_l2_after": after, "heldout_gain": 1.0 - after / before,
         "cross_validated_gain": cv_gain,
         "true_effect_l2": None if ref is None else ref["heldout_l2"],
@@ -418,6 +419,9 @@ def run(args: argparse.Namespace) -> int:
                           f"{case['heldout_l2_before'] * 1e3:.1f} -> {case['heldout_l2_after'] * 1e3:.1f} mm"
                           + ("" if case["cross_validated_gain"] is None else
                              f" ({-case['cross_validated_gain']:+.0%} over the folds)")
+                          + ("" if not case["closest"] else
+                             f" (closest {case['closest']['name']}, {-case['closest']['heldout_gain']:+.0%}"
+                             + (" over the folds)" if len(case["closest"]["folds"]) > 1 else ")"))
                           + ("" if not case["rollouts_first"] else
                              f" (the rollouts led with {case['rollouts_first']}, the residual chose)")
                           + ("" if not case["not_separated_from"] else

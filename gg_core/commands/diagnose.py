@@ -71,6 +71,8 @@ def run(args: argparse.Namespace) -> int:
     report = run_diagnose(req)
     if args.progress != "jsonl":
         data = json.loads(report.read_text())
+        near = data.get("closest")      # a none's near miss (verdict.closest)
         print(json.dumps({"report": str(report), **{k: data[k] for k in (
-            "verdict", "accepted", "heldout_l2_before", "heldout_l2_after")}}))
+            "verdict", "accepted", "heldout_l2_before", "heldout_l2_after")},
+            "closest": near and {k: near[k] for k in ("name", "heldout_gain", "why_not")}}))
     return 0

@@ -26,7 +26,7 @@ from .result import Result
 from .scan import scan_region
 from .selection import Design, fit, gram, select
 from .starts import in_form, measure, measured_lag, reference_trials, regressed, trial_from_starts
-from .verdict import confirmed, implausible, judge_reference, named_first, propose, unresolved
+from .verdict import closest, confirmed, implausible, judge_reference, named_first, propose, unresolved
 
 if TYPE_CHECKING:
     from ..stages.diagnose import DiagnoseRequest
@@ -147,7 +147,8 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     rivals = unresolved(cv, passing) if len(accepted) == 1 and not rollouts_first else []
     return Result(loc, sel, trials, accepted, null, null_refit, after, baseline,
                   dict(zip(r.labels, r.adjust.tolist())), r.batch, unphysical, progress, cv, reference, timings, scans,
-                  withheld, rollouts_first, rivals, delivered, delivered_sim)
+                  withheld, rollouts_first, rivals, delivered, delivered_sim,
+                  None if accepted else closest(cv, unphysical, req.min_gain, req.min_gain_mm))
 
 
 def _trialled_model(name: str, folds: list[Fold], ctx: Context

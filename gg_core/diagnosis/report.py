@@ -207,6 +207,8 @@ def write_html(path: Path, report: dict, vertices: np.ndarray, faces: np.ndarray
         verdict = (f"<p>Nothing missing: no candidate effect, refitted to physically plausible values, lowered the "
                    f"held-out rollout error by the required margin while also improving the training sequences' "
                    f"rollouts (baseline {before * 1e3:.1f} mm).</p>")
+        if report.get("closest"):
+            verdict += f"<p>{html.escape(closest_sentence(report['closest']))}</p>"
         if report.get("rest_mesh_given") is False:
             verdict += f"<p>{html.escape(LOADED_REST_CAVEAT)}</p>"
     noise = report.get("denoising")
@@ -303,6 +305,23 @@ def _pct(gain: float | None) -> str:
 
 def _share(value: float | None) -> str:
     return "n/a" if value is None else format(value, ".0%")
+
+
+def closest_sentence(closest: dict) -> str:
+    """What the candidate nearest to being named (verdict.closest) gained and which rules it failed: a near miss is
+    weak evidence, to be settled by more recordings, not a finding."""
+    name = f"{closest['name'].replace('_', ' ')} ({closest['class'].replace('_', ' ')})"
+    folds = closest["folds"]
+    if not closest["heldout_gain"] > 0:
+        over = f" on average over {len(folds)} folds" if len(folds) > 1 else ""
+        return f"No candidate lowered the held-out rollout error; the best, {name}, changed it by " \
+               f"{-closest['heldout_gain']:+.1%}{over}."
+    per_fold = ", ".join(f"{f['heldout_gain']:.1%} with {', '.join(f['heldout'])} held out" for f in folds)
+    over = f"by {closest['heldout_gain']:.1%} on average over {len(folds)} folds ({per_fold})" if len(folds) > 1 \
+        else f"by {closest['heldout_gain']:.1%} ({per_fold})"
+    return (f"Closest to being named: {name}, which lowered the held-out rollout error {over}, short of what naming "
+            f"needs: {'; '.join(closest['why_not'])}. Weak evidence, not a finding: more or longer recordings that "
+            f"exercise it would confirm or rule it out.")
 
 
 def bootstrap_sentence(selection: dict) -> str:

@@ -41,6 +41,7 @@ class Result:
     unseparated: list[str] = field(default_factory=list)   # unresolved rivals of the one accepted (verdict.unresolved)
     final: Trial | None = None         # the accepted model refitted on every recording (pipeline.final_fit) ...
     final_sim: ImplicitSimulator | None = None   # ... and its simulator
+    closest: dict | None = None        # where nothing was accepted, the candidate nearest to it (verdict.closest)
 
     def region_of(self, name: str) -> np.ndarray | None:
         """The region candidate `name` acted on: its scan's, or the localization's."""
@@ -131,6 +132,7 @@ class Result:
             "heldout_l2_before": self.heldout_before,
             "heldout_l2_after": self.heldout_after,
             "heldout_gain": 1.0 - self.heldout_after / self.heldout_before,
+            "closest": self.closest,
             "heldout_gain_cross_validated": (self.cross_validated(self.accepted[0]) or {}).get("heldout_gain")
             if self.accepted else None,
             "final_fit": None if self.final is None else {

@@ -73,6 +73,8 @@ def test_diagnose_command_prints_the_verdict(tmp_path, capsys):
     assert code == 0
     line = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert line["verdict"] in ("none", "missing") and line["report"].endswith("diagnose.json")
+    near = line["closest"]     # a none's near miss, with what it lacked; nothing beside a named effect
+    assert near is None if line["verdict"] == "missing" else (near is None or near["why_not"])
     assert (tmp_path / "p" / "reports" / "diagnose.html").is_file()
 
 

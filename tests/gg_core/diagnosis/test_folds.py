@@ -150,3 +150,30 @@ def test_trials_given_the_truth_are_reported_per_fold_and_never_named():
     assert summary["given_truth"]["gravity_offset"]["heldout_gain"] == pytest.approx(0.91 / 3)
     del folds[2].given["gravity_offset"]
     assert CrossValidation(folds).given_mean_gain("gravity_offset") is None     # over every fold or not at all
+
+
+def test_a_refused_candidate_says_which_rules_it_failed():
+    # Blender's hidden wind on a two-recording tiny capture, seed 2 (session 53): +3.2 / +13.6 % held out
+    wind = CrossValidation([fold("arm", (0.00300, 0.00495), wind=(0.002904, 0.00399)),
+                            fold("walk", (0.00622, 0.00260), wind=(0.005373, 0.00203))])
+    assert wind.shortfalls("wind", 0.10, 0.25) == ["mean held-out gain +8.4%, under 10%", "under 5% with arm held out"]
+    assert not wind.confirmed("wind", 0.10, 0.25) and wind.shortfalls("wind", 0.08, 0.25) == \
+        ["under 4% with arm held out"]
+    assert wind.confirmed("wind", 0.05, 0.25) and wind.shortfalls("wind", 0.05, 0.25) == []
+    three = CrossValidation([fold("arm", (0.010, 0.010), x=(0.0110, 0.011)),
+                             fold("walk", (0.010, 0.010), x=(0.0098, 0.009)),
+                             fold("twist", (0.010, 0.010), x=(0.0100, 0.009))])
+    assert three.shortfalls("x", 0.10, 0.25) == [
+        "mean held-out gain -2.7%, under 10%", "mean held-out improvement -0.27 mm, under 0.25 mm",
+        "held-out rollouts better in 1 of 3 folds", "training rollouts worse with arm held out"]
+    partial = CrossValidation([fold("arm", (0.010, 0.010), x=(0.005, 0.005)), fold("walk", (0.010, 0.010))])
+    assert partial.shortfalls("x", 0.10, 0.25) == [
+        "refitted in 1 of 2 folds: not among the split's finalists (a gain of 10% on its held-out or training "
+        "rollouts)"]
+
+
+def test_a_rollout_that_failed_is_never_confirmed():
+    diverged = CrossValidation([fold("arm", (0.010, 0.010), x=(float("nan"), 0.005)),
+                                fold("walk", (0.010, 0.010), x=(0.005, 0.005))])
+    assert not diverged.confirmed("x", 0.10, 0.25)
+    assert diverged.shortfalls("x", 0.10, 0.25) == ["no finite rollout error with arm held out"]

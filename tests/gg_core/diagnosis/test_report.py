@@ -121,3 +121,23 @@ def test_the_page_says_what_a_none_could_not_see(tmp_path):
     report["rest_mesh_given"] = False          # a steady load may hide in a loaded rest state: the page says so
     page = write_html(tmp_path / "e.html", report, v, f, np.linspace(0, 1, len(v))).read_text()
     assert "not estimable" not in page and "run again with --rest-mesh" in page
+    assert "Closest" not in page and "No candidate lowered" not in page
+
+
+def test_a_none_says_which_candidate_came_closest_and_what_it_lacked(tmp_path):
+    v, f = sheet(4, 4, 0.5, 0.5)
+    near = {"name": "wind", "class": "wind", "heldout_gain": 0.084, "train_rollout_gain": 0.20, "min_gain": 0.1,
+            "folds": [{"heldout": ["01_arm_swing"], "heldout_gain": 0.032, "train_rollout_gain": 0.19},
+                      {"heldout": ["00_walk"], "heldout_gain": 0.136, "train_rollout_gain": 0.22}],
+            "why_not": ["mean held-out gain +8.4%, under 10%", "under 5% with 01_arm_swing held out"]}
+    report = {"verdict": "none", "accepted": [], "effects": [EFFECT], "heldout_l2_before": 0.003,
+              "heldout_l2_after": 0.003, "outputs": {}, "baseline": {"density": 0.2}, "closest": near,
+              "localization": {"vertex_feature": {"name": "height", "spearman": 0.5, "meaning": "height"},
+                               "step_feature": {"name": "speed", "spearman": 0.4, "meaning": "speed |v|"}}}
+    page = write_html(tmp_path / "d.html", report, v, f, np.linspace(0, 1, len(v))).read_text()
+    assert ("Closest to being named: wind (wind), which lowered the held-out rollout error by 8.4% on average over "
+            "2 folds (3.2% with 01_arm_swing held out, 13.6% with 00_walk held out), short of what naming needs: mean "
+            "held-out gain +8.4%, under 10%; under 5% with 01_arm_swing held out. Weak evidence") in page
+    near.update(heldout_gain=-0.02, folds=near["folds"][:1])
+    page = write_html(tmp_path / "e.html", report, v, f, np.linspace(0, 1, len(v))).read_text()
+    assert "No candidate lowered the held-out rollout error; the best, wind (wind), changed it by +2.0%." in page

@@ -10,7 +10,7 @@ from gg_core.diagnosis.confirm import Trial
 from gg_core.diagnosis.folds import CrossValidation
 from gg_core.diagnosis.library import BY_NAME
 from gg_core.diagnosis.selection import Selection
-from gg_core.diagnosis.verdict import (confirmed, implausible, judge_reference, named_first, propose, selected,
+from gg_core.diagnosis.verdict import (closest, confirmed, implausible, judge_reference, named_first, propose, selected,
                                       unresolved)
 from gg_core.physics.cloth import Cloth
 
@@ -175,3 +175,17 @@ def test_region_refits_outside_the_candidates_range_are_not_that_physics(sheet):
     assert "bending" in implausible(region("region_stiffness", stretch=1.0, bending=400.0), sheet)
     assert implausible(region("rest_length_region", rest=0.72), sheet) is None
     assert implausible(region("rest_length_region", rest=0.3), sheet) is not None
+
+
+def test_a_none_reports_the_plausible_candidate_nearest_to_being_named():
+    cv = CrossValidation([fold("arm", (0.00300, 0.00495), wind=(0.002904, 0.00399), body_friction=(0.0026, 0.0049),
+                               air_drag=(0.0020, 0.0030)),
+                          fold("walk", (0.00622, 0.00260), wind=(0.005373, 0.00203), air_drag=(0.0050, 0.0020))])
+    near = closest(cv, {"air_drag": "drag coefficient C_d 4.5 in air"}, 0.10, 0.25)
+    # friction's 13 % on the split alone is no fold mean; quadratic drag's refit was not air
+    assert near["name"] == "wind" and near["class"] == "wind" and near["heldout_gain"] == pytest.approx(0.084, abs=5e-4)
+    assert [f["heldout"] for f in near["folds"]] == [["arm"], ["walk"]]
+    assert near["why_not"] == cv.shortfalls("wind", 0.10, 0.25) and near["min_gain"] == 0.10
+    split_only = CrossValidation([fold("arm", (0.010, 0.010), wind=(0.0104, 0.009), mass_damping=(0.0101, 0.011))])
+    assert closest(split_only, {}, 0.10, 0.25)["name"] == "mass_damping"    # every candidate worse: the least worse
+    assert closest(split_only, {"wind": "x", "mass_damping": "y"}, 0.10, 0.25) is None

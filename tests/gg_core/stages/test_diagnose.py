@@ -53,7 +53,7 @@ def test_hidden_gravity_tilt_is_named_refitted_and_improves_heldout(tilted, tmp_
     assert dict(model.terms)["gravity_offset"]["delta_g"] == final["gravity_offset.delta_g"]
     assert model.cloth.flat and model.cloth.n_vertices == len(read_mesh(project / "diagnose" / "template.ply")[0])
     assert float(model.cloth.material.density[0]) == pytest.approx(final["material.density"])
-    assert report["heldout_l2_after"] < 0.5 * report["heldout_l2_before"]
+    assert report["heldout_l2_after"] < 0.5 * report["heldout_l2_before"] and report["closest"] is None
     # the recordings hang off the baseline's rollouts along the tilt (+x), not across it
     lag = report["baseline"]["train_rollout_lag_x_mm"], report["baseline"]["train_rollout_lag_z_mm"]
     assert lag[0] > 3.0 * abs(lag[1]) and lag[0] > 0.5
@@ -86,6 +86,9 @@ def test_nothing_hidden_gives_verdict_none(tmp_path):
     assert folds[0]["given_truth"]["gravity_offset"]["heldout_l2"] == \
         report["reference_trials"]["gravity_offset"]["heldout_l2"]
     assert report["cross_validation"]["given_truth"]["gravity_offset"]["heldout_gain"] < 0.1   # nothing to gain
+    near = report["closest"]       # the candidate nearest to being named, and what it lacked (verdict.closest)
+    assert near["name"] in {e["name"] for e in report["effects"] if not e["implausible"]} and near["why_not"]
+    assert near["heldout_gain"] == report["cross_validation"]["candidates"][near["name"]]["heldout_gain"]
 
 
 def test_registered_meshes_are_read_from_the_project(tilted, tmp_path):
