@@ -295,13 +295,14 @@ def summary(report: dict) -> str:
     (folds.CrossValidation.residual_tie_break) or, where nothing chose, the rivals it was not told from
     (verdict.unresolved), and the delivered values the recordings do not fix at all (identify.profiles: every
     multiple profiled rolls out about as well), which a user should not read as measured. A `none` names the
-    candidate that came closest where it lowered the held-out error at all (verdict.closest): weak evidence."""
+    candidate that came closest where it was refitted in every fold and lowered the held-out error there
+    (verdict.closest, report.closest_sentence): weak evidence."""
     if report.get("verdict") != "missing":
         loaded = "; rest state a loaded frame, a steady load may hide in it" if report.get("rest_mesh_given") is False \
             else ""
         near = report.get("closest") or {}
         closest = f"; closest: {near['name']} (held-out error {-near['heldout_gain']:+.1%}, not enough to name it)" \
-            if near.get("heldout_gain", 0.0) > 0 else ""
+            if near.get("heldout_gain", 0.0) > 0 and len(near.get("folds", [])) > 1 else ""
         return f"Nothing missing: the simulator explains the recordings{closest}{loaded}"
     accepted = report.get("accepted", [])
     if len(accepted) > 1 and report.get("heldout_gain") is not None:

@@ -308,20 +308,21 @@ def _share(value: float | None) -> str:
 
 
 def closest_sentence(closest: dict) -> str:
-    """What the candidate nearest to being named (verdict.closest) gained and which rules it failed: a near miss is
-    weak evidence, to be settled by more recordings, not a finding."""
+    """What the candidate nearest to being named (verdict.closest) gained and which rules it failed. Only one that
+    was refitted with each recording held out (a finalist) and lowered the error there is called a near miss: weak
+    evidence, to be settled by more recordings, not a finding; a few percent on the split alone is no evidence."""
     name = f"{closest['name'].replace('_', ' ')} ({closest['class'].replace('_', ' ')})"
-    folds = closest["folds"]
-    if not closest["heldout_gain"] > 0:
+    folds, gain = closest["folds"], closest["heldout_gain"]
+    if not gain > 0:
         over = f" on average over {len(folds)} folds" if len(folds) > 1 else ""
-        return f"No candidate lowered the held-out rollout error; the best, {name}, changed it by " \
-               f"{-closest['heldout_gain']:+.1%}{over}."
+        return f"No candidate lowered the held-out rollout error; the best, {name}, changed it by {-gain:+.1%}{over}."
+    if len(folds) == 1:
+        return (f"No candidate came close: the best, {name}, lowered the held-out rollout error by {gain:.1%} on "
+                f"the split alone, not refitted with each recording held out as a finding needs.")
     per_fold = ", ".join(f"{f['heldout_gain']:.1%} with {', '.join(f['heldout'])} held out" for f in folds)
-    over = f"by {closest['heldout_gain']:.1%} on average over {len(folds)} folds ({per_fold})" if len(folds) > 1 \
-        else f"by {closest['heldout_gain']:.1%} ({per_fold})"
-    return (f"Closest to being named: {name}, which lowered the held-out rollout error {over}, short of what naming "
-            f"needs: {'; '.join(closest['why_not'])}. Weak evidence, not a finding: more or longer recordings that "
-            f"exercise it would confirm or rule it out.")
+    return (f"Closest to being named: {name}, which lowered the held-out rollout error by {gain:.1%} on average "
+            f"over {len(folds)} folds ({per_fold}), short of what naming needs: {'; '.join(closest['why_not'])}. "
+            f"Weak evidence, not a finding: more or longer recordings that exercise it would confirm or rule it out.")
 
 
 def bootstrap_sentence(selection: dict) -> str:
