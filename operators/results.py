@@ -302,7 +302,7 @@ def summary(report: dict) -> str:
             else ""
         near = report.get("closest") or {}
         closest = f"; closest: {near['name']} (held-out error {-near['heldout_gain']:+.1%}, not enough to name it)" \
-            if near.get("heldout_gain", 0.0) > 0 and len(near.get("folds", [])) > 1 else ""
+            if near.get("near_miss") else ""
         return f"Nothing missing: the simulator explains the recordings{closest}{loaded}"
     accepted = report.get("accepted", [])
     if len(accepted) > 1 and report.get("heldout_gain") is not None:

@@ -316,7 +316,7 @@ def closest_sentence(closest: dict) -> str:
     if not gain > 0:
         over = f" on average over {len(folds)} folds" if len(folds) > 1 else ""
         return f"No candidate lowered the held-out rollout error; the best, {name}, changed it by {-gain:+.1%}{over}."
-    if len(folds) == 1:
+    if not closest["near_miss"]:
         return (f"No candidate came close: the best, {name}, lowered the held-out rollout error by {gain:.1%} on "
                 f"the split alone, not refitted with each recording held out as a finding needs.")
     per_fold = ", ".join(f"{f['heldout_gain']:.1%} with {', '.join(f['heldout'])} held out" for f in folds)

@@ -121,7 +121,9 @@ def propose(sel: Selection, min_inclusion: float, max_trials: int) -> list[str]:
 def closest(cv: CrossValidation, unphysical: dict[str, str], min_gain: float, min_gain_mm: float) -> dict | None:
     """Where nothing was confirmed, the physically plausible candidate that came nearest: the one refitted in every
     fold with the largest mean held-out gain (else the split's best), its gains per fold and the rules it failed
-    (CrossValidation.shortfalls). None where no plausible candidate was tried.
+    (CrossValidation.shortfalls). `near_miss`: refitted with each recording held out (more than one fold) and it
+    lowered the error there, weak evidence a user should see; a gain on the split alone is none. None where no
+    plausible candidate was tried.
 
     Why: "nothing missing" and "something the recordings could not confirm" are different answers. Measured
     (session 53, Blender's hidden wind on two-recording tiny captures, the unloaded garment given): seed 1 named
@@ -132,7 +134,8 @@ def closest(cv: CrossValidation, unphysical: dict[str, str], min_gain: float, mi
         return None
     name = max(names, key=lambda n: (cv.complete(n), np.nan_to_num(cv.mean_gains(n)[0], nan=-np.inf)))
     held, train = cv.mean_gains(name)
+    folds = [dict(zip(("heldout_gain", "train_rollout_gain"), f.gains(name)), heldout=f.heldout)
+             for f in cv.folds if name in f.trials]
     return {"name": name, "class": BY_NAME[name].equivalence, "heldout_gain": held, "train_rollout_gain": train,
-            "folds": [{"heldout": f.heldout, "heldout_gain": f.gains(name)[0], "train_rollout_gain": f.gains(name)[1]}
-                      for f in cv.folds if name in f.trials],
+            "folds": folds, "near_miss": bool(len(folds) > 1 and held > 0),
             "min_gain": min_gain, "why_not": cv.shortfalls(name, min_gain, min_gain_mm)}

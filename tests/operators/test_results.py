@@ -212,14 +212,14 @@ def test_nothing_missing_is_said_plainly(blender, tmp_path):
     blender.context.scene.gg.project_path = str(tmp_path / "loaded")
     assert blender.ops.gg.show_residuals() == {"FINISHED"}
     assert blender.context.scene.gg.diagnosis.endswith("rest state a loaded frame, a steady load may hide in it")
-    near = {"name": "wind", "heldout_gain": 0.084, "folds": [{}, {}],
+    near = {"name": "wind", "heldout_gain": 0.084, "folds": [{}, {}], "near_miss": True,
             "why_not": ["mean held-out gain +8.4%, under 10%"]}
     _write_diagnosis(tmp_path / "near", {"verdict": "none", "accepted": [], "closest": near}, np.zeros(4))
     blender.context.scene.gg.project_path = str(tmp_path / "near")
     assert blender.ops.gg.show_residuals() == {"FINISHED"}
     assert blender.context.scene.gg.diagnosis == ("Nothing missing: the simulator explains the recordings; closest: "
                                                   "wind (held-out error -8.4%, not enough to name it)")
-    near["folds"] = [{}]      # a few percent on the split alone, never refitted in other folds: no near miss
+    near.update(folds=[{}], near_miss=False)   # a few percent on the split alone, never refitted in other folds
     _write_diagnosis(tmp_path / "split", {"verdict": "none", "accepted": [], "closest": near}, np.zeros(4))
     blender.context.scene.gg.project_path = str(tmp_path / "split")
     assert blender.ops.gg.show_residuals() == {"FINISHED"}

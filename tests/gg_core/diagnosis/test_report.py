@@ -127,6 +127,7 @@ def test_the_page_says_what_a_none_could_not_see(tmp_path):
 def test_a_none_says_which_candidate_came_closest_and_what_it_lacked(tmp_path):
     v, f = sheet(4, 4, 0.5, 0.5)
     near = {"name": "wind", "class": "wind", "heldout_gain": 0.084, "train_rollout_gain": 0.20, "min_gain": 0.1,
+            "near_miss": True,
             "folds": [{"heldout": ["01_arm_swing"], "heldout_gain": 0.032, "train_rollout_gain": 0.19},
                       {"heldout": ["00_walk"], "heldout_gain": 0.136, "train_rollout_gain": 0.22}],
             "why_not": ["mean held-out gain +8.4%, under 10%", "under 5% with 01_arm_swing held out"]}
@@ -138,7 +139,8 @@ def test_a_none_says_which_candidate_came_closest_and_what_it_lacked(tmp_path):
     assert ("Closest to being named: wind (wind), which lowered the held-out rollout error by 8.4% on average over "
             "2 folds (3.2% with 01_arm_swing held out, 13.6% with 00_walk held out), short of what naming needs: mean "
             "held-out gain +8.4%, under 10%; under 5% with 01_arm_swing held out. Weak evidence") in page
-    near.update(heldout_gain=0.028, folds=near["folds"][:1])     # Blender's none s1 with the rest given, session 54
+    # Blender's none s1 with the rest given, session 54
+    near.update(heldout_gain=0.028, folds=near["folds"][:1], near_miss=False)
     page = write_html(tmp_path / "e.html", report, v, f, np.linspace(0, 1, len(v))).read_text()
     assert ("No candidate came close: the best, wind (wind), lowered the held-out rollout error by 2.8% on the split "
             "alone, not refitted with each recording held out as a finding needs.") in page

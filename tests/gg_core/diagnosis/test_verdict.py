@@ -185,7 +185,10 @@ def test_a_none_reports_the_plausible_candidate_nearest_to_being_named():
     # friction's 13 % on the split alone is no fold mean; quadratic drag's refit was not air
     assert near["name"] == "wind" and near["class"] == "wind" and near["heldout_gain"] == pytest.approx(0.084, abs=5e-4)
     assert [f["heldout"] for f in near["folds"]] == [["arm"], ["walk"]]
-    assert near["why_not"] == cv.shortfalls("wind", 0.10, 0.25) and near["min_gain"] == 0.10
+    assert near["why_not"] == cv.shortfalls("wind", 0.10, 0.25) and near["min_gain"] == 0.10 and near["near_miss"]
     split_only = CrossValidation([fold("arm", (0.010, 0.010), wind=(0.0104, 0.009), mass_damping=(0.0101, 0.011))])
-    assert closest(split_only, {}, 0.10, 0.25)["name"] == "mass_damping"    # every candidate worse: the least worse
+    least_worse = closest(split_only, {}, 0.10, 0.25)      # every candidate worse: the least worse, no near miss
+    assert least_worse["name"] == "mass_damping" and not least_worse["near_miss"]
+    gained = CrossValidation([fold("arm", (0.010, 0.010), wind=(0.009, 0.009))])
+    assert not closest(gained, {}, 0.10, 0.25)["near_miss"]   # a gain on the split alone is no near miss
     assert closest(split_only, {"wind": "x", "mass_damping": "y"}, 0.10, 0.25) is None
