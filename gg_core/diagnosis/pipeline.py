@@ -57,7 +57,8 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
 
     t0 = time.perf_counter()
     ctx = Context.build(sim, r.batch, loc.region, r.predicted)
-    scans = {c.name: scan_region(c, ctx, r.pooling, r.predicted, r.y, r.nuisance_cols, req.probe_acceleration)
+    scans = {c.name: scan_region(c, ctx, r.pooling, r.predicted, r.y, r.nuisance_cols, req.probe_acceleration,
+                                 train, attached)
              for c in candidates if c.region_from == "scan"}
     contexts = {c.name: replace(ctx, region=scans[c.name].region) if c.name in scans else ctx for c in candidates}
     progress.step("region scan")
@@ -270,8 +271,10 @@ def _candidate_rows(contexts: dict[str, Context], pooling: Pooling, predicted: n
 @dataclass
 class _FoldJob:
     """One more fold of the cross-validation (folds.py) for a worker process: everything refitted on `train`
-    without `heldout`; the finalists tried on the regions fold 0 chose, the `reference` candidates (benchmarks: the
-    true effect) on `reference_region`."""
+    without `heldout`; the finalists tried on the regions fold 0 localized, or, where they scan for their own
+    (scan.py), on the region this fold's scan of its own training recordings chooses: that region is chosen on
+    training rollouts, and fold 0's were rollouts of recordings this fold holds out. The `reference` candidates
+    (benchmarks: the true effect) are tried on `reference_region`."""
     req: DiagnoseRequest
     train: list[Observed]
     heldout: list[Observed]
@@ -301,6 +304,12 @@ def _run_fold(job: _FoldJob, step: Step) -> Fold:
     for n in job.names:
         cand = BY_NAME[n]
         ctx = Context.build(sim, r.batch, job.regions[n], r.predicted)
+        if cand.region_from == "scan":
+            ctx = replace(ctx, region=scan_region(cand, ctx, r.pooling, r.predicted, r.y, r.nuisance_cols,
+                                                  req.probe_acceleration, job.train, job.attached).region)
+            if ctx.region is None:
+                step(f"trial {n} without {held}: no region scanned on this fold's recordings")
+                continue
         coefs = regressed(cand, ctx, r, cand.probes(ctx, req.probe_acceleration))
         trials[n] = trial_from_starts(cand, coefs, sim, ctx, job.train, job.heldout, job.attached, config,
                                       req.probe_acceleration, measured_lag(req.source, r))

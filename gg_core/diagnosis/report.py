@@ -264,11 +264,20 @@ def region_sentence(loc: dict) -> str:
         if scan["region_vertices"]:
             out.append(f"{name} scanned the garment patch by patch and acts on {len(scan['region_vertices'])} "
                        f"vertices ({len(scan['patches'])} patches), where one change explains "
-                       f"{100 * scan['explained']:.1f} % of the residual.")
+                       f"{100 * scan['explained']:.1f} % of the residual{_rolled_out(scan.get('rollouts'))}.")
         else:
             out.append(f"{name} scanned the garment patch by patch: no patch explains enough of the residual "
                        f"(best {100 * scan['best_patch_explained']:.1f} %), so it was not tried.")
     return " ".join(out)
+
+
+def _rolled_out(rollouts: dict | None) -> str:
+    """How the scanned region's change rolled the training recordings out, where its rollouts chose it."""
+    if not rollouts or rollouts["train_rollout_l2"] >= rollouts["train_rollout_l2_before"]:
+        return ""
+    return (f"; the training rollouts chose it, grown from the patches the residual proposed: a change of "
+            f"x{rollouts['scale']:.2f} there takes their error from {rollouts['train_rollout_l2_before'] * 1e3:.1f} "
+            f"to {rollouts['train_rollout_l2'] * 1e3:.1f} mm before any refit")
 
 
 def _baseline_paragraph(baseline: dict) -> str:

@@ -157,7 +157,12 @@ class Result:
                              "scanned_regions": {n: {"region_vertices": None if r.region is None
                                                      else np.flatnonzero(r.region).tolist(),
                                                      "patches": r.patches, "explained": r.explained,
-                                                     "best_patch_explained": float(r.patch_explained.max())}
+                                                     "best_patch_explained": float(r.patch_explained.max()),
+                                                     "one_frame_patches": r.one_frame_patches,
+                                                     "rollouts": None if r.region is None else {
+                                                         "train_rollout_l2_before": r.rollout_l2_before,
+                                                         "train_rollout_l2": r.rollout_l2,
+                                                         "scale": float(np.exp(r.strength))}}
                                                  for n, r in self.scans.items()}},
             "train_rollout_l2_before": self.null.train_l2,
             "null_refit": {"heldout_l2": self.null_refit.heldout_l2, "train_rollout_l2": self.null_refit.train_l2},

@@ -23,6 +23,18 @@ sits at the seam's top: the rest of it is free to shrink, which the rest shape a
 itself: on the `none` captures the grown region explained 15 % and 24 % of the residual (its trials gained 2 % and
 -1 %). Which patches win depends on the k-means partition (offline, shrink seed 2: 12-vertex patches from two
 seeds gave 10 / 27 and 12 / 32 vertices on the seam; 6-vertex patches stopped at one patch, 6 / 11 and 5 / 9).
+
+The one-frame share is a poor guide to which patches of a seam matter: a uniform tension along a line cancels
+inside it and shows at its ends, so patches in a seam's middle regress with the opposite sign and the union of the
+seam's patches explains less than its best patch (Blender's seam shrink s3 with the unloaded garment given: the
+best patch 6.1 %, all five seam patches together 2.0 %). So the region the one-frame scan proposes is then chosen
+on the training rollouts (rollout_region): it, and each of the ROLLOUT_SEEDS patches that explain most alone, at
+the strength that rolls the training recordings out best, the best grown patch by neighbouring patch while that
+lowers the training rollout error by ROLLOUT_GROWTH. Measured offline (session 55, /work/data/s55/grow_roll.py,
+the unrefitted baseline, held-out rollouts never seen): s3 the one-frame region 31 vertices (17 on the seam),
+training 11.5 mm, held-out 13.8 mm at its scale against the baseline's 12.2 / 15.5 mm; by rollouts 42 vertices
+(22 on the seam) at x0.89, 9.4 / 8.9 mm (the true seam at x0.85: 8.2 / 6.1 mm); s1 and s2 kept the one-frame
+region (it rolled out best: 9.7 / 9.1 and 9.3 / 8.6 mm).
 """
 from __future__ import annotations
 
@@ -30,7 +42,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .library import Candidate, Context
+from ..physics.fitting import Observed, mean_rollout_error
+from .confirm import golden_section
+from .library import Candidate, Context, applied
 from .localize import REGION_MAX_FRACTION
 from .residuals import Pooling, responses
 from .selection import Design, explained_share, fit, gram
@@ -42,6 +56,10 @@ GROWTH_SHARE = 0.01     # share of the residual a neighbouring patch must add to
 # tried: its best patch, on the seam, explained 4.8 % (offline, /work/data/s21/scan_probe.py; the true region
 # gains 36 % held-out)
 MIN_SHARE = GROWTH_SHARE
+ROLLOUT_SEEDS = 4          # single patches, those explaining most alone, tried on the rollouts beside the region
+ROLLOUT_GROWTH = 0.01      # relative drop of the training rollout error a neighbouring patch must bring to join
+STRENGTH_EVALUATIONS = 8   # rollouts of a golden-section search for a region's strength
+GROWTH_EVALUATIONS = 5     # and for a grown region's, between none and the strength before it grew
 
 
 @dataclass
@@ -50,6 +68,10 @@ class ScanResult:
     patches: list[int]           # chosen patches, in order of entry
     explained: float             # share of the nuisance-only residual the region's one change explains
     patch_explained: np.ndarray  # [P] share each patch explains alone
+    one_frame_patches: list[int]   # the region the one-frame residual grew, before the rollouts chose
+    rollout_l2_before: float     # training rollout error of the baseline (m), NaN where nothing was rolled out
+    rollout_l2: float            # of the baseline with the chosen region changed, at its best strength
+    strength: float              # that change as a log-scale of the candidate's fields
 
 
 def patch_adjacency(patch: np.ndarray, edges: np.ndarray) -> list[set[int]]:
@@ -97,10 +119,10 @@ def grow(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarr
 
 
 def scan_region(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.ndarray, y: np.ndarray,
-                nuisance: np.ndarray, acceleration: float) -> ScanResult:
-    """The region of `cand` (a region candidate) from its response on each pooling patch; `y` and `nuisance` are
-    the pooled residual rows and nuisance columns of the selection, `predicted` the unchanged one-frame
-    prediction."""
+                nuisance: np.ndarray, acceleration: float, train: list[Observed], pinned: np.ndarray) -> ScanResult:
+    """The region of `cand` (a region candidate) from its response on each pooling patch, chosen on the rollouts
+    of the training recordings `train` (rollout_region); `y` and `nuisance` are the pooled residual rows and
+    nuisance columns of the selection, `predicted` the unchanged one-frame prediction."""
     columns_arr = np.zeros((pooling.n_patches, len(y), len(cand.coefficients)))
     for p in range(pooling.n_patches):
         probes = cand.probes(replace(ctx, region=(pooling.patch == p).astype(np.float64)), acceleration)
@@ -111,7 +133,59 @@ def scan_region(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.n
     free = pooling.patch >= 0
     sizes = np.bincount(pooling.patch[free], minlength=pooling.n_patches)
     max_patches = max(1, int(REGION_MAX_FRACTION * free.sum() / max(sizes.mean(), 1.0)))
-    chosen, share, alone = grow(cand, y, nuisance, columns_arr, pooling.groups(),
-                                patch_adjacency(pooling.patch, ctx.sim.num.edges), max_patches, MIN_SHARE)
-    region = np.isin(pooling.patch, chosen).astype(np.float64) if chosen else None
-    return ScanResult(region, chosen, share, alone)
+    neighbours = patch_adjacency(pooling.patch, ctx.sim.num.edges)
+    groups = pooling.groups()
+    chosen, share, alone = grow(cand, y, nuisance, columns_arr, groups, neighbours, max_patches, MIN_SHARE)
+    if not chosen:
+        return ScanResult(None, [], share, alone, [], float("nan"), float("nan"), 0.0)
+    seeds = [[int(p)] for p in np.argsort(-alone)[:ROLLOUT_SEEDS] if [int(p)] != chosen]
+    rolled = rollout_region(cand, ctx, pooling.patch, [chosen, *seeds], neighbours, max_patches, train, pinned)
+    base = fit(gram(Design(y, nuisance, {}, groups)), [], {}).rss
+    explained = _share(cand, y, nuisance, columns_arr[rolled.patches].sum(0), groups, base)
+    return ScanResult(np.isin(pooling.patch, rolled.patches).astype(np.float64), rolled.patches, explained, alone,
+                      chosen, rolled.before, rolled.error, rolled.strength)
+
+
+@dataclass
+class RolledRegion:
+    """A region tried on the training rollouts, at its best strength."""
+
+    patches: list[int]
+    strength: float     # log-scale of the candidate's fields on the region
+    error: float        # training rollout error there (m)
+    before: float       # the baseline's
+
+
+def rollout_region(cand: Candidate, ctx: Context, patch: np.ndarray, starts: list[list[int]],
+                   neighbours: list[set[int]], max_patches: int, train: list[Observed], pinned: np.ndarray
+                   ) -> RolledRegion:
+    """The region, of the `starts` (patch lists, the one-frame region first) and what grows from the best of them,
+    whose change at its best strength rolls the `train` recordings out best. Each start's strength is searched
+    over the candidate's declared range (golden section); a neighbouring patch joins where the union, at its best
+    strength between none and the current one (a larger region needs less), lowers the error by ROLLOUT_GROWTH.
+    Where no start beats the unchanged baseline, the one-frame region stands (the trial refits its strength)."""
+    lo, hi = np.log1p(cand.bounds)
+
+    def error(patches: list[int], strength: float) -> float:
+        region = np.isin(patch, patches).astype(np.float64)
+        change = cand.model(np.full(len(cand.coefficients), np.expm1(strength)), replace(ctx, region=region))
+        with applied(ctx.sim, change, region) as sim:
+            return float(np.nan_to_num(mean_rollout_error(sim, train, pinned), nan=np.inf))
+
+    before = error(starts[0], 0.0)
+    searched = [RolledRegion(p, *golden_section(lambda s, p=p: error(p, s), lo, hi, STRENGTH_EVALUATIONS), before)
+                for p in starts]
+    best = min(searched, key=lambda r: r.error)
+    if best.error >= before:
+        return replace(searched[0], error=before, strength=0.0)
+    while len(best.patches) < max_patches:
+        border = set().union(*(neighbours[p] for p in best.patches)) - set(best.patches)
+        bracket = sorted((0.0, best.strength))
+        tries = [RolledRegion(best.patches + [q], *golden_section(lambda s, q=q: error(best.patches + [q], s),
+                                                                  *bracket, GROWTH_EVALUATIONS), before)
+                 for q in sorted(border)]
+        grown = min(tries, key=lambda r: r.error, default=None)
+        if grown is None or grown.error > (1.0 - ROLLOUT_GROWTH) * best.error:
+            break
+        best = grown
+    return best

@@ -1,6 +1,7 @@
 """The candidates a diagnosis may try, and the accepted model's final fit on every recording."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
@@ -57,3 +58,50 @@ def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_fits(
                      ("the refitted simulator", "its params", len(pipeline.BASELINE_FIT), ["a", "b", "c"], 0.005)]
     assert final.train_l2 == 0.003 and simulator == "the refitted simulator"   # what stages.diagnose writes
     assert final.identified["wind.velocity"]["range_factors"] == [pytest.approx(0.5 ** 0.25), None]
+
+
+@dataclass
+class _Region:
+    region: np.ndarray | None
+
+
+def test_a_fold_scans_its_own_training_recordings_for_a_scanned_region(monkeypatch):
+    """pipeline._run_fold: a candidate that scans for its region (scan.py) is tried on the region this fold's
+    scan of its own training recordings chooses, not fold 0's (chosen on rollouts of recordings this fold holds
+    out), and not at all where that scan finds none; a localized region candidate keeps fold 0's region."""
+    train = [Observed(n, np.zeros((3, 2, 3)), None, 30.0) for n in ("a", "b")]
+    heldout = [Observed("c", np.zeros((3, 2, 3)), None, 30.0)]
+    r = SimpleNamespace(batch=None, predicted=None, pooling="the fold's pooling", y="y", nuisance_cols="n")
+    base = Trial([], 0.005, float("nan"), 0.004)
+    monkeypatch.setattr(pipeline, "fit_baseline", lambda *a: ("sim", "params", {}, [], 0.004))
+    monkeypatch.setattr(pipeline, "mean_rollout_error", lambda *a: 0.005)
+    monkeypatch.setattr(pipeline, "measure", lambda *a: r)
+    monkeypatch.setattr(pipeline, "trial", lambda *a: base)
+    monkeypatch.setattr(pipeline, "regressed", lambda *a: np.zeros(1))
+    monkeypatch.setattr(pipeline.Candidate, "probes", lambda *a: [])
+    monkeypatch.setattr(pipeline, "reference_trials", lambda *a: {})
+    monkeypatch.setattr(pipeline.Context, "build", lambda sim, batch, region, predicted: _Region(region))
+    tried, scanned = {}, []
+
+    def fake_trial(cand, coefs, sim, ctx, fit_on, held, attached, config, acceleration, lag):
+        tried[cand.name] = ctx.region
+        return Trial([cand.name], 0.004, 1.0, 0.003)
+
+    def fake_scan(cand, ctx, pooling, predicted, y, nuisance, acceleration, fit_on, attached):
+        scanned.append((cand.name, pooling, [o.name for o in fit_on]))
+        return SimpleNamespace(region=found)
+
+    monkeypatch.setattr(pipeline, "trial_from_starts", fake_trial)
+    monkeypatch.setattr(pipeline, "scan_region", fake_scan)
+    req = SimpleNamespace(seed=0, refit_iterations=1, probe_acceleration=0.5, source="ground truth")
+    monkeypatch.setattr(pipeline, "fit_config", lambda *a: None)
+    split_region, found = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    job = pipeline._FoldJob(req, train, heldout, None, None, None, None, None,
+                            ["rest_length_region", "heavy_region"],
+                            {"rest_length_region": split_region, "heavy_region": split_region}, None)
+    fold = pipeline._run_fold(job, lambda msg: None)
+    assert scanned == [("rest_length_region", "the fold's pooling", ["a", "b"])]
+    assert tried["rest_length_region"] is found and tried["heavy_region"] is split_region
+    assert set(fold.trials) == {"rest_length_region", "heavy_region"} and fold.heldout == ["c"]
+    found = None                                    # this fold's scan finds no region: the candidate is not tried
+    assert set(pipeline._run_fold(job, lambda msg: None).trials) == {"heavy_region"}

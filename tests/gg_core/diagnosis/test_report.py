@@ -92,15 +92,19 @@ def test_the_sentence_says_how_precisely_the_recordings_fix_each_delivered_value
 
 
 def testregion_sentence_says_where_each_region_candidate_acted():
+    rolled = {"train_rollout_l2_before": 0.0122, "train_rollout_l2": 0.0094, "scale": 0.89}
     scanned = {"rest_length_region": {"region_vertices": [1, 2, 3], "patches": [4, 7], "explained": 0.123,
-                                      "best_patch_explained": 0.1},
+                                      "best_patch_explained": 0.1, "rollouts": rolled},
                "heavy_region": {"region_vertices": None, "patches": [], "explained": 0.01,
                                 "best_patch_explained": 0.01}}
     text = region_sentence({"region_vertices": [5, 6], "region_source": "deformation activity",
                              "scanned_regions": scanned})
     assert text.startswith("Region candidates act on 2 vertices, singled out because it stretches differently")
     assert "rest_length_region scanned the garment patch by patch and acts on 3 vertices (2 patches)" in text
-    assert "12.3 % of the residual" in text
+    assert ("12.3 % of the residual; the training rollouts chose it, grown from the patches the residual "
+            "proposed: a change of x0.89 there takes their error from 12.2 to 9.4 mm before any refit.") in text
+    rolled["train_rollout_l2"] = 0.0122          # no change rolled out better: the rollouts chose nothing
+    assert "12.3 % of the residual. " in region_sentence({"scanned_regions": scanned})
     assert "heavy_region scanned the garment patch by patch: no patch explains enough of the residual (best 1.0 %)" \
         in text
     assert region_sentence({}).startswith("No garment region stood out in the maps")

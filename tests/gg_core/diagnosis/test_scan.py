@@ -1,14 +1,16 @@
 """Region scan: growing a region over neighbouring patches finds the patches the residual came from and nothing in
-noise; on our own simulator, a hidden rest-length change on a strip of a hanging sheet is found on that strip."""
+noise; on our own simulator, a hidden rest-length change on a strip of a hanging sheet is found on that strip, and
+the training rollouts choose the start on the strip over one off it, and nothing where nothing is hidden."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from diagnosis_helpers import MATERIAL, hanging_sheet
 
 from gg_core.diagnosis.library import BY_NAME, Context, apply_region
 from gg_core.diagnosis.residuals import build_frames, make_pooling, residual
-from gg_core.diagnosis.scan import MIN_SHARE, grow, patch_adjacency, scan_region
+from gg_core.diagnosis.scan import MIN_SHARE, grow, patch_adjacency, rollout_region, scan_region
 from gg_core.physics.cloth import Cloth
 from gg_core.physics.fitting import Observed
 from gg_core.physics.forces import make_terms
@@ -45,32 +47,54 @@ def test_grow_takes_the_neighbouring_patches_the_residual_came_from():
     assert grow(REST, rng.normal(size=600), nuisance, columns, groups, _chain(10), 5, MIN_SHARE)[0] == []
 
 
-def test_hidden_rest_length_change_on_a_strip_is_found_there():
-    v, f, pinned = hanging_sheet()
-    strip = np.isclose(v[:, 0], v[:, 0].max()) | np.isclose(v[:, 0], np.sort(np.unique(v[:, 0]))[-2])
-    base = ["gravity", "stretching", "bending"]
-    truth = ImplicitSimulator(Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **MATERIAL)),
-                              terms=make_terms(base))
-    apply_region(truth.cloth, strip.astype(np.float64), {"rest": float(np.log(0.95))})
-    truth.refresh()
+BASE_TERMS = ["gravity", "stretching", "bending"]
+
+
+def _swaying(sim: ImplicitSimulator, v: np.ndarray) -> list[Observed]:
     sequences = []
     for k, amp in enumerate((0.08, 0.12)):
         shift = np.zeros((14, 3))
         shift[:, 0] = amp * np.sin(2 * np.pi * 1.2 * np.arange(14) / 30)
-        traj = truth.rollout(ClothState(v.copy(), np.zeros_like(v)), None, n_frames=14,
-                             pin_frames=v[None] + shift[:, None])
+        traj = sim.rollout(ClothState(v.copy(), np.zeros_like(v)), None, n_frames=14,
+                           pin_frames=v[None] + shift[:, None])
         sequences.append(Observed(f"s{k}", traj, None, 30.0))
-    model = ImplicitSimulator(Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **MATERIAL)),
-                              terms=make_terms(base))
+    return sequences
+
+
+def _sheet_sim(v: np.ndarray, f: np.ndarray, pinned: np.ndarray) -> ImplicitSimulator:
+    return ImplicitSimulator(Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **MATERIAL)),
+                             terms=make_terms(BASE_TERMS))
+
+
+def test_hidden_rest_length_change_on_a_strip_is_found_there():
+    v, f, pinned = hanging_sheet()
+    strip = np.isclose(v[:, 0], v[:, 0].max()) | np.isclose(v[:, 0], np.sort(np.unique(v[:, 0]))[-2])
+    truth = _sheet_sim(v, f, pinned)
+    apply_region(truth.cloth, strip.astype(np.float64), {"rest": float(np.log(0.95))})
+    truth.refresh()
+    sequences = _swaying(truth, v)
+    model = _sheet_sim(v, f, pinned)
     batch = build_frames(model, sequences)
     res = residual(model, batch)
     pooling = make_pooling(model, batch, patch_vertices=5, window=4)
     y = pooling.rows(res)
-    result = scan_region(REST, Context.build(model, batch), pooling, batch.x_next - res, y, np.ones((len(y), 1)),
-                         0.5)
+    ctx = Context.build(model, batch)
+    result = scan_region(REST, ctx, pooling, batch.x_next - res, y, np.ones((len(y), 1)), 0.5, sequences, pinned)
     assert result.region is not None and result.explained > 0.5
     found = result.region > 0
     on_strip = strip & (model.num.free > 0)
     assert (found & on_strip).sum() >= 0.7 * on_strip.sum()    # most of the strip ...
     assert (found & ~strip).sum() <= (found & strip).sum()     # ... and mostly the strip
     assert result.patch_explained.argmax() in set(pooling.patch[on_strip])
+    assert result.rollout_l2 < 0.5 * result.rollout_l2_before and result.strength < 0     # a shrink rolls out better
+
+    off = [int(p) for p in set(pooling.patch[~strip & (model.num.free > 0)]) - set(pooling.patch[strip])]
+    neighbours = patch_adjacency(pooling.patch, model.num.edges)
+    on = int(pooling.patch[on_strip][0])
+    rolled = rollout_region(REST, ctx, pooling.patch, [[off[0]], [on]], neighbours, 4, sequences, pinned)
+    assert set(rolled.patches) == set(pooling.patch[on_strip])      # grown from the strip over all of it
+    assert rolled.strength == pytest.approx(np.log(0.95), rel=0.2) and rolled.error < 0.3 * rolled.before
+
+    still = _swaying(model, v)                 # nothing hidden: no change rolls out better, the first start stands
+    rolled = rollout_region(REST, ctx, pooling.patch, [[off[0]], [on]], neighbours, 4, still, pinned)
+    assert rolled.patches == [off[0]] and rolled.strength == 0.0 and rolled.error == rolled.before
