@@ -30,11 +30,13 @@ seam's patches explains less than its best patch (Blender's seam shrink s3 with 
 best patch 6.1 %, all five seam patches together 2.0 %). So the region the one-frame scan proposes is then chosen
 on the training rollouts (rollout_region): it, and each of the ROLLOUT_SEEDS patches that explain most alone, at
 the strength that rolls the training recordings out best, the best grown patch by neighbouring patch while that
-lowers the training rollout error by ROLLOUT_GROWTH. Measured offline (session 55, /work/data/s55/grow_roll.py,
-the unrefitted baseline, held-out rollouts never seen): s3 the one-frame region 31 vertices (17 on the seam),
-training 11.5 mm, held-out 13.8 mm at its scale against the baseline's 12.2 / 15.5 mm; by rollouts 42 vertices
-(22 on the seam) at x0.89, 9.4 / 8.9 mm (the true seam at x0.85: 8.2 / 6.1 mm); s1 and s2 kept the one-frame
-region (it rolled out best: 9.7 / 9.1 and 9.3 / 8.6 mm).
+lowers the training rollout error by ROLLOUT_GROWTH. Measured offline (session 55, /work/data/s55/evalscan.py:
+this scan on the stored baselines, the unrefitted baseline changed on the chosen region, held-out rollouts never
+seen by the choice): s3 the one-frame region 31 vertices (17 on the seam) rolls out 11.5 mm on training at its
+best scale (held-out 13.8 mm at x0.85), the baseline 12.2 / 15.5 mm; the rollouts' region 42 vertices (19 on the
+seam) at x0.885, 9.1 / 8.7 mm (the true seam at x0.85: 8.2 / 6.1 mm); s1 kept the one-frame region (39
+vertices, 21 on the seam, x0.86: 15.0 -> 9.7 mm training, 15.3 -> 8.9 mm held out); on `none` s1 no change
+rolled the training recordings out better (7.8 mm), so its one-frame region stood, unscaled.
 """
 from __future__ import annotations
 
