@@ -36,7 +36,10 @@ seen by the choice): s3 the one-frame region 31 vertices (17 on the seam) rolls 
 best scale (held-out 13.8 mm at x0.85), the baseline 12.2 / 15.5 mm; the rollouts' region 42 vertices (19 on the
 seam) at x0.885, 9.1 / 8.7 mm (the true seam at x0.85: 8.2 / 6.1 mm); s1 kept the one-frame region (39
 vertices, 21 on the seam, x0.86: 15.0 -> 9.7 mm training, 15.3 -> 8.9 mm held out); on `none` s1 no change
-rolled the training recordings out better (7.8 mm), so its one-frame region stood, unscaled.
+rolled the training recordings out better (7.8 mm), so its one-frame region stood, unscaled; on `none` s2 another
+patch at x0.972 rolled the training recordings out 8 % better and the held-out one no better (5.84 mm both).
+End to end (`gg bench diagnose --rest-given`, 20 steps): s3, missed before, named (-29.9 % over the folds, each
+fold scanning its own recordings; the true seam -46.4 %), s2 -42.6 % (was -44.6 %), `none` s1 none.
 """
 from __future__ import annotations
 
