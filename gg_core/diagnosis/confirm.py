@@ -106,6 +106,7 @@ class Trial:
     start_coefs: np.ndarray | None = None   # a single candidate's coefficients at that start (final_fit reuses them)
     compared: dict[str, float] = field(default_factory=dict)   # final fit: each earlier fit's rollout error (best_fit)
     identified: dict[str, dict] = field(default_factory=dict)  # final fit: its effect parameters' profiles (identify)
+    region: np.ndarray | None = None   # [V] where the change's region fields act (None: no region)
 
 
 def merge(changes: list[ModelChange]) -> ModelChange:
@@ -169,7 +170,8 @@ def fitted_trial(base: ImplicitSimulator, base_fit: tuple[str, ...], chosen: lis
                 train_error, start_label = rollout_choice(sim, chosen[0][0], ctx, train, pinned, train_error)
     error = mean_rollout_error(sim, heldout, pinned) if heldout else float("nan")
     return Trial([c.name for c, _ in chosen], error, loss, train_error, params.values(), time.perf_counter() - start,
-                 start_label, start_coefs=chosen[0][1] if len(chosen) == 1 else None, compared=compared), sim, params
+                 start_label, start_coefs=chosen[0][1] if len(chosen) == 1 else None, compared=compared,
+                 region=region), sim, params
 
 
 def _at_start(base: ImplicitSimulator, base_fit: tuple[str, ...], change: ModelChange, region: np.ndarray | None,

@@ -10,10 +10,11 @@ each training sequence is held out in turn, and everything of that fold (baselin
 refit) is fitted without it. A candidate is confirmed on the folds' mean held-out gain, and must help the
 held-out rollouts in most folds and the training rollouts in every fold (CrossValidation.confirmed).
 
-What the extra folds do not redo: the choice of finalists and of a region candidate's region (both from fold 0's
-training sequences, which include the sequence a later fold holds out; a spurious choice fitted to that sequence's
-quirks gains nothing there, because the fold's refit no longer sees it), the rest state and the attached vertices
-(properties of the garment, which every rollout starts from anyway).
+What the extra folds do not redo: the choice of finalists and of a localized region candidate's region (both from
+fold 0's training sequences, which include the sequence a later fold holds out; a spurious choice fitted to that
+sequence's quirks gains nothing there, because the fold's refit no longer sees it), the rest state and the attached
+vertices (properties of the garment, which every rollout starts from anyway). A region chosen on training rollouts
+(scan.py) is chosen again on each fold's own: fold 0's rollouts include the recording the fold holds out.
 """
 from __future__ import annotations
 

@@ -98,11 +98,17 @@ def _share(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.nda
     return 0.0 if base <= 0 else explained_share(fit(g, [cand.name], {cand.name: cand}).rss, base)
 
 
-def grow(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarray, groups: np.ndarray,
+def nuisance_rss(y: np.ndarray, nuisance: np.ndarray, groups: np.ndarray) -> float:
+    """Residual sum of squares of the pooled residual rows `y` with only the nuisance columns fitted: what the
+    shares of grow and _share are shares of."""
+    return fit(gram(Design(y, nuisance, {}, groups)), [], {}).rss
+
+
+def grow(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarray, groups: np.ndarray, base: float,
          neighbours: list[set[int]], max_patches: int, min_share: float) -> tuple[list[int], float, np.ndarray]:
-    """Patches of the region and its explained share from per-patch response rows `columns` [P,R,K] (a change on
-    a union of patches responds as the sum of their rows: the responses are linear in the change)."""
-    base = fit(gram(Design(y, nuisance, {}, groups)), [], {}).rss
+    """Patches of the region and its explained share of `base` (nuisance_rss) from per-patch response rows
+    `columns` [P,R,K] (a change on a union of patches responds as the sum of their rows: the responses are linear
+    in the change)."""
     alone = np.array([_share(cand, y, nuisance, c, groups, base) for c in columns])
     best = int(np.argmax(alone))
     chosen, share = [best], float(alone[best])
@@ -124,10 +130,12 @@ def grow(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarr
 
 
 def scan_region(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.ndarray, y: np.ndarray,
-                nuisance: np.ndarray, acceleration: float, train: list[Observed], pinned: np.ndarray) -> ScanResult:
+                nuisance: np.ndarray, acceleration: float, train: list[Observed], pinned: np.ndarray,
+                train_l2: float) -> ScanResult:
     """The region of `cand` (a region candidate) from its response on each pooling patch, chosen on the rollouts
-    of the training recordings `train` (rollout_region); `y` and `nuisance` are the pooled residual rows and
-    nuisance columns of the selection, `predicted` the unchanged one-frame prediction."""
+    of the training recordings `train` (rollout_region), which the unchanged simulator rolls out `train_l2` (m) off
+    (the baseline fit measured it); `y` and `nuisance` are the pooled residual rows and nuisance columns of the
+    selection, `predicted` the unchanged one-frame prediction."""
     columns_arr = np.zeros((pooling.n_patches, len(y), len(cand.coefficients)))
     for p in range(pooling.n_patches):
         probes = cand.probes(replace(ctx, region=(pooling.patch == p).astype(np.float64)), acceleration)
@@ -140,12 +148,13 @@ def scan_region(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.n
     max_patches = max(1, int(REGION_MAX_FRACTION * free.sum() / max(sizes.mean(), 1.0)))
     neighbours = patch_adjacency(pooling.patch, ctx.sim.num.edges)
     groups = pooling.groups()
-    chosen, share, alone = grow(cand, y, nuisance, columns_arr, groups, neighbours, max_patches, MIN_SHARE)
+    base = nuisance_rss(y, nuisance, groups)
+    chosen, share, alone = grow(cand, y, nuisance, columns_arr, groups, base, neighbours, max_patches, MIN_SHARE)
     if not chosen:
         return ScanResult(None, [], share, alone, [], float("nan"), float("nan"), 0.0)
     seeds = [[int(p)] for p in np.argsort(-alone)[:ROLLOUT_SEEDS] if [int(p)] != chosen]
-    rolled = rollout_region(cand, ctx, pooling.patch, [chosen, *seeds], neighbours, max_patches, train, pinned)
-    base = fit(gram(Design(y, nuisance, {}, groups)), [], {}).rss
+    rolled = rollout_region(cand, ctx, pooling.patch, [chosen, *seeds], neighbours, max_patches, train, pinned,
+                            train_l2)
     explained = _share(cand, y, nuisance, columns_arr[rolled.patches].sum(0), groups, base)
     return ScanResult(np.isin(pooling.patch, rolled.patches).astype(np.float64), rolled.patches, explained, alone,
                       chosen, rolled.before, rolled.error, rolled.strength)
@@ -162,12 +171,13 @@ class RolledRegion:
 
 
 def rollout_region(cand: Candidate, ctx: Context, patch: np.ndarray, starts: list[list[int]],
-                   neighbours: list[set[int]], max_patches: int, train: list[Observed], pinned: np.ndarray
-                   ) -> RolledRegion:
+                   neighbours: list[set[int]], max_patches: int, train: list[Observed], pinned: np.ndarray,
+                   before: float) -> RolledRegion:
     """The region, of the `starts` (patch lists, the one-frame region first) and what grows from the best of them,
-    whose change at its best strength rolls the `train` recordings out best. Each start's strength is searched
-    over the candidate's declared range (golden section); a neighbouring patch joins where the union, at its best
-    strength between none and the current one (a larger region needs less), lowers the error by ROLLOUT_GROWTH.
+    whose change at its best strength rolls the `train` recordings out best (`before`: the unchanged simulator's
+    error). Each start's strength is searched over the candidate's declared range (golden section); a neighbouring
+    patch joins where the union, at its best strength between none and the current one (a larger region needs
+    less), lowers the error by ROLLOUT_GROWTH.
     Where no start beats the unchanged baseline, the one-frame region stands (the trial refits its strength)."""
     lo, hi = np.log1p(cand.bounds)
 
@@ -177,7 +187,6 @@ def rollout_region(cand: Candidate, ctx: Context, patch: np.ndarray, starts: lis
         with applied(ctx.sim, change, region) as sim:
             return float(np.nan_to_num(mean_rollout_error(sim, train, pinned), nan=np.inf))
 
-    before = error(starts[0], 0.0)
     searched = [RolledRegion(p, *golden_section(lambda s, p=p: error(p, s), lo, hi, STRENGTH_EVALUATIONS), before)
                 for p in starts]
     best = min(searched, key=lambda r: r.error)

@@ -31,11 +31,17 @@ def test_the_accepted_model_is_refitted_on_every_recording_from_its_trials_fits(
     in that form, with nothing left to hold out."""
     ctx = SimpleNamespace(region=np.ones(3, bool))
     kept = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.3, 0.0, 0.1]}, start="without refit",
-                 form="moving air", start_coefs=np.array([0.2, 0.1]))
-    fold_a = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.4, 0.0, 0.1]}, form="moving air")
-    fold_b = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.5, 0.0, 0.1]})   # another form: not a start
+                 form="moving air", start_coefs=np.array([0.2, 0.1]), region=np.ones(3))
+    fold_a = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.4, 0.0, 0.1]}, form="moving air",
+                   region=np.ones(3))
+    fold_b = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.5, 0.0, 0.1]},     # another form: not a start
+                   region=np.ones(3))
+    fold_c = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.6, 0.0, 0.1]}, form="moving air",
+                   region=np.array([1.0, 0.0, 0.0]))    # fitted on another region (its own scan): not a start
+    fold_d = Trial(["wind"], 0.004, 1.0, 0.005, {"wind.pressure": [0.7, 0.0, 0.1]}, form="moving air")  # none
     folds = [Fold(["a", "b"], ["c"], kept, {"wind": kept}), Fold(["b", "c"], ["a"], kept, {"wind": fold_a}),
-             Fold(["a", "c"], ["b"], kept, {"wind": fold_b}), Fold(["a"], ["b", "c"], kept, {})]
+             Fold(["a", "c"], ["b"], kept, {"wind": fold_b}), Fold(["a"], ["b", "c"], kept, {}),
+             Fold(["b"], ["a", "c"], kept, {"wind": fold_c}), Fold(["c"], ["a", "b"], kept, {"wind": fold_d})]
     chosen, model_ctx, fits = pipeline._trialled_model("wind", folds, ctx)
     ((cand, coefs),) = chosen
     assert cand.model is MOVING_AIR.model and coefs.tolist() == [0.2, 0.1] and model_ctx is ctx
@@ -87,8 +93,8 @@ def test_a_fold_scans_its_own_training_recordings_for_a_scanned_region(monkeypat
         tried[cand.name] = ctx.region
         return Trial([cand.name], 0.004, 1.0, 0.003)
 
-    def fake_scan(cand, ctx, pooling, predicted, y, nuisance, acceleration, fit_on, attached):
-        scanned.append((cand.name, pooling, [o.name for o in fit_on]))
+    def fake_scan(cand, ctx, pooling, predicted, y, nuisance, acceleration, fit_on, attached, train_l2):
+        scanned.append((cand.name, pooling, [o.name for o in fit_on], ctx.region, train_l2))
         return SimpleNamespace(region=found)
 
     monkeypatch.setattr(pipeline, "trial_from_starts", fake_trial)
@@ -98,9 +104,9 @@ def test_a_fold_scans_its_own_training_recordings_for_a_scanned_region(monkeypat
     split_region, found = np.array([1.0, 0.0]), np.array([0.0, 1.0])
     job = pipeline._FoldJob(req, train, heldout, None, None, None, None, None,
                             ["rest_length_region", "heavy_region"],
-                            {"rest_length_region": split_region, "heavy_region": split_region}, None)
+                            {"heavy_region": split_region}, None)
     fold = pipeline._run_fold(job, lambda msg: None)
-    assert scanned == [("rest_length_region", "the fold's pooling", ["a", "b"])]
+    assert scanned == [("rest_length_region", "the fold's pooling", ["a", "b"], None, 0.004)]   # its baseline's
     assert tried["rest_length_region"] is found and tried["heavy_region"] is split_region
     assert set(fold.trials) == {"rest_length_region", "heavy_region"} and fold.heldout == ["c"]
     found = None                                    # this fold's scan finds no region: the candidate is not tried

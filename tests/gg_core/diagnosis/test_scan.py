@@ -10,9 +10,9 @@ from diagnosis_helpers import MATERIAL, hanging_sheet
 
 from gg_core.diagnosis.library import BY_NAME, Context, apply_region
 from gg_core.diagnosis.residuals import build_frames, make_pooling, residual
-from gg_core.diagnosis.scan import MIN_SHARE, grow, patch_adjacency, rollout_region, scan_region
+from gg_core.diagnosis.scan import MIN_SHARE, grow, nuisance_rss, patch_adjacency, rollout_region, scan_region
 from gg_core.physics.cloth import Cloth
-from gg_core.physics.fitting import Observed
+from gg_core.physics.fitting import Observed, mean_rollout_error
 from gg_core.physics.forces import make_terms
 from gg_core.physics.material import Material
 from gg_core.physics.simulator import ClothState, ImplicitSimulator
@@ -36,15 +36,19 @@ def test_grow_takes_the_neighbouring_patches_the_residual_came_from():
     groups = np.repeat(np.arange(10), 60)
     nuisance = rng.normal(size=(600, 2))       # unrelated global re-adjustment columns
     y = -0.5 * (columns[4] + columns[5] + columns[6])[:, 0] + 0.3 * rng.normal(size=600)
-    chosen, share, alone = grow(REST, y, nuisance, columns, groups, _chain(10), 5, 0.05)
+    base = nuisance_rss(y, nuisance, groups)
+    chosen, share, alone = grow(REST, y, nuisance, columns, groups, base, _chain(10), 5, 0.05)
     assert sorted(chosen) == [4, 5, 6]
     assert share > 0.85 and share > alone.max() + 0.3         # signal 0.75 of 0.84 in all
-    chosen, share, _ = grow(REST, y, nuisance, columns, groups, _chain(10), 2, 0.05)
+    chosen, share, _ = grow(REST, y, nuisance, columns, groups, base, _chain(10), 2, 0.05)
     assert len(chosen) == 2                                 # the size cap holds
-    chosen, share, alone = grow(REST, rng.normal(size=600), nuisance, columns, groups, _chain(10), 5,
-                                0.05)
+    noise = rng.normal(size=600)
+    chosen, share, alone = grow(REST, noise, nuisance, columns, groups, nuisance_rss(noise, nuisance, groups),
+                                _chain(10), 5, 0.05)
     assert chosen == [] and alone.max() < 0.05              # noise: no region
-    assert grow(REST, rng.normal(size=600), nuisance, columns, groups, _chain(10), 5, MIN_SHARE)[0] == []
+    noise = rng.normal(size=600)
+    assert grow(REST, noise, nuisance, columns, groups, nuisance_rss(noise, nuisance, groups), _chain(10), 5,
+                MIN_SHARE)[0] == []
 
 
 BASE_TERMS = ["gravity", "stretching", "bending"]
@@ -79,22 +83,26 @@ def test_hidden_rest_length_change_on_a_strip_is_found_there():
     pooling = make_pooling(model, batch, patch_vertices=5, window=4)
     y = pooling.rows(res)
     ctx = Context.build(model, batch)
-    result = scan_region(REST, ctx, pooling, batch.x_next - res, y, np.ones((len(y), 1)), 0.5, sequences, pinned)
+    before = mean_rollout_error(model, sequences, pinned)
+    result = scan_region(REST, ctx, pooling, batch.x_next - res, y, np.ones((len(y), 1)), 0.5, sequences, pinned,
+                         before)
     assert result.region is not None and result.explained > 0.5
     found = result.region > 0
     on_strip = strip & (model.num.free > 0)
     assert (found & on_strip).sum() >= 0.7 * on_strip.sum()    # most of the strip ...
     assert (found & ~strip).sum() <= (found & strip).sum()     # ... and mostly the strip
     assert result.patch_explained.argmax() in set(pooling.patch[on_strip])
-    assert result.rollout_l2 < 0.5 * result.rollout_l2_before and result.strength < 0     # a shrink rolls out better
+    assert result.rollout_l2_before == before
+    assert result.rollout_l2 < 0.5 * before and result.strength < 0     # a shrink rolls out better
 
     off = [int(p) for p in set(pooling.patch[~strip & (model.num.free > 0)]) - set(pooling.patch[strip])]
     neighbours = patch_adjacency(pooling.patch, model.num.edges)
     on = int(pooling.patch[on_strip][0])
-    rolled = rollout_region(REST, ctx, pooling.patch, [[off[0]], [on]], neighbours, 4, sequences, pinned)
+    rolled = rollout_region(REST, ctx, pooling.patch, [[off[0]], [on]], neighbours, 4, sequences, pinned, before)
     assert set(rolled.patches) == set(pooling.patch[on_strip])      # grown from the strip over all of it
     assert rolled.strength == pytest.approx(np.log(0.95), rel=0.2) and rolled.error < 0.3 * rolled.before
 
     still = _swaying(model, v)                 # nothing hidden: no change rolls out better, the first start stands
-    rolled = rollout_region(REST, ctx, pooling.patch, [[off[0]], [on]], neighbours, 4, still, pinned)
-    assert rolled.patches == [off[0]] and rolled.strength == 0.0 and rolled.error == rolled.before
+    calm = mean_rollout_error(model, still, pinned)
+    rolled = rollout_region(REST, ctx, pooling.patch, [[off[0]], [on]], neighbours, 4, still, pinned, calm)
+    assert rolled.patches == [off[0]] and rolled.strength == 0.0 and rolled.error == rolled.before == calm
