@@ -15,6 +15,7 @@ from physics_helpers import sheet, uv_sphere  # noqa: E402
 
 from gg_core.diagnosis.confirm import CandidateParams, Trial  # noqa: E402
 from gg_core.diagnosis.folds import Fold  # noqa: E402
+from gg_core.diagnosis.library import apply_region  # noqa: E402
 from gg_core.geometry.meshio import write_obj, write_ply  # noqa: E402
 from gg_core.physics.cloth import Cloth  # noqa: E402
 from gg_core.physics.fitting import Observed  # noqa: E402
@@ -37,13 +38,16 @@ def hanging_sheet() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return v, f, pinned
 
 
-def write_sim_capture(root: Path, extra: dict[str, dict] | None = None, n_frames: int = 16) -> Path:
+def write_sim_capture(root: Path, extra: dict[str, dict] | None = None, n_frames: int = 16,
+                      region: tuple[np.ndarray, dict[str, float]] | None = None) -> Path:
     """Sequences a, b (train) and c (held out) of the sheet simulated with the default model (its air damping
-    included) plus `extra`."""
+    included) plus `extra`, and a `region` [V] of it changed by log-scales (library.apply_region)."""
     extra = extra or {}
     bv, bf = uv_sphere(0.1, 12, 24, center=(0.0, 1.0, 0.0))
     v, f, pinned = hanging_sheet()
     cloth = Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **MATERIAL))
+    if region is not None:
+        apply_region(cloth, *region)
     terms = make_terms(["gravity", "stretching", "bending", "mass_damping"] + list(extra), extra)
     for name, (amp, freq) in SEQUENCES.items():
         t = np.arange(n_frames) / 30
