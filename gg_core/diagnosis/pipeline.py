@@ -181,10 +181,10 @@ def final_fit(sim: ImplicitSimulator, chosen: list[tuple[Candidate, np.ndarray]]
     """The accepted model refitted on EVERY recording, held-out ones included, once held-out rollouts have
     confirmed it (confirm.fitted_trial in the accepted trial's form), and that simulator: the model the diagnosis
     delivers (stages.diagnose writes it for `gg simulate --behavior`). It starts from whichever of the labelled
-    `fits` (the split's fit, the other folds' fits: _trialled_model) rolls every recording out best, or from the
-    central one of three or more that roll them out within PROFILE_TOLERANCE x `baseline_l2` of the best (the
-    recordings do not tell those apart: confirm.best_fit), and keeps the refit only where it rolls every
-    recording out better still (confirm.refit_or_keep). Every held-out figure of the report stays the split's,
+    `fits` (the split's fit, the other folds' fits on its region: _trialled_model) rolls every recording out
+    best, or from the central one of three or more that roll them out within PROFILE_TOLERANCE x `baseline_l2` of
+    the best (the recordings do not tell those apart: confirm.best_fit), and keeps the refit only where it rolls
+    every recording out better still (confirm.refit_or_keep). Every held-out figure of the report stays the split's,
     whose fit never saw those recordings. The delivered effect parameters' profiles over every recording
     (identify.profiles, against `baseline_l2`: the baseline's mean rollout error over `recordings`, measured when it
     was fitted) say how precisely the recordings fix each of them.
