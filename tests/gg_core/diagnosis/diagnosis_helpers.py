@@ -38,6 +38,11 @@ def hanging_sheet() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return v, f, pinned
 
 
+def side_strip(v: np.ndarray) -> np.ndarray:
+    """[V] bool: the hanging sheet's two vertex columns at largest x, where tests hide a seam-like region change."""
+    return np.isclose(v[:, 0], v[:, 0].max()) | np.isclose(v[:, 0], np.sort(np.unique(v[:, 0]))[-2])
+
+
 def write_sim_capture(root: Path, extra: dict[str, dict] | None = None, n_frames: int = 16,
                       region: tuple[np.ndarray, dict[str, float]] | None = None) -> Path:
     """Sequences a, b (train) and c (held out) of the sheet simulated with the default model (its air damping

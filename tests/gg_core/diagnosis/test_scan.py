@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diagnosis_helpers import MATERIAL, hanging_sheet
+from diagnosis_helpers import MATERIAL, hanging_sheet, side_strip
 
 from gg_core.diagnosis.library import BY_NAME, Context, apply_region
 from gg_core.diagnosis.residuals import build_frames, make_pooling, residual
@@ -72,7 +72,7 @@ def _sheet_sim(v: np.ndarray, f: np.ndarray, pinned: np.ndarray) -> ImplicitSimu
 
 def test_hidden_rest_length_change_on_a_strip_is_found_there():
     v, f, pinned = hanging_sheet()
-    strip = np.isclose(v[:, 0], v[:, 0].max()) | np.isclose(v[:, 0], np.sort(np.unique(v[:, 0]))[-2])
+    strip = side_strip(v)
     truth = _sheet_sim(v, f, pinned)
     apply_region(truth.cloth, strip.astype(np.float64), {"rest": float(np.log(0.95))})
     truth.refresh()

@@ -14,7 +14,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parents[1] / "diagnosis"))
 sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
 
-from diagnosis_helpers import hanging_sheet, write_sim_capture  # noqa: E402
+from diagnosis_helpers import hanging_sheet, side_strip, write_sim_capture  # noqa: E402
 
 from gg_core.errors import InputError  # noqa: E402
 from gg_core.geometry.meshio import read_mesh, write_ply  # noqa: E402
@@ -96,7 +96,7 @@ def test_hidden_rest_length_change_is_scanned_named_and_refitted_on_its_own_regi
     on the training rollouts, again in each fold), named, and refitted on every recording starting only from fits
     made on the delivered region (pipeline._trialled_model)."""
     v, f, _ = hanging_sheet()
-    strip = np.isclose(v[:, 0], v[:, 0].max()) | np.isclose(v[:, 0], np.sort(np.unique(v[:, 0]))[-2])
+    strip = side_strip(v)
     capture = write_sim_capture(tmp_path / "shrunk", region=(strip.astype(np.float64), {"rest": np.log(0.9)}))
     write_ply(tmp_path / "rest.ply", v, f)
     report = json.loads(run_diagnose(DiagnoseRequest(capture=capture, project=tmp_path / "p", workers=2,
