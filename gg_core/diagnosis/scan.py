@@ -40,6 +40,16 @@ rolled the training recordings out better (7.8 mm), so its one-frame region stoo
 patch at x0.972 rolled the training recordings out 8 % better and the held-out one no better (5.84 mm both).
 End to end (`gg bench diagnose --rest-given`, 20 steps): s3, missed before, named (-29.9 % over the folds, each
 fold scanning its own recordings; the true seam -46.4 %), s2 -42.6 % (was -44.6 %), `none` s1 none.
+
+Finer than patches, tried offline and not adopted (session 57, /work/data/s56/{border,strip,layer,peel}.py on
+session 55's stored baselines of the seam shrinks s1-s3, the region's best scale each time): the seam's exact
+vertices matter as much as the whole scan gains (s2: the true 36 vertices roll the training recordings out 7.98
+mm, without the 6 where the seam is three vertices wide 9.28, the scan's region 9.22); no single vertex added at
+the region's border (24, 5 on the seam) or removed (23) lowers it by more than 2.3 %; straight strips along the
+region's axis reach 8.95; peeling the vertices the gradient of the teacher-forced loss w.r.t. per-edge rest
+lengths points out (AUC 0.85 for the seam, 1 s) lowers the training rollouts on s1 / s2 / s3 by 13.5 / 5.2 / 2.6 %,
+held out by 9.6 / 3.5 % on s1 / s2 but raises it by 8.3 % on s3; on `none` s1 two vertices added at x1.018 lower
+held-out by 8 %. Changes of a few vertices are within the rollouts' sensitivity, so the patches stay the unit.
 """
 from __future__ import annotations
 
