@@ -165,10 +165,12 @@ def test_a_gravity_offset_beyond_any_tilt_of_gravity_is_not_gravity(sheet):
     assert "146 m/s^2" in implausible(tilted((144.6, 0.0, -23.5)), sheet)
 
 
-def test_region_refits_outside_the_candidates_range_are_not_that_physics(sheet):
-    def region(name: str, **scales: float) -> Trial:
-        return Trial([name], 0.008, 1.0, 0.01, {f"region.{k}_scale": v for k, v in scales.items()})
+def region(name: str, **scales: float) -> Trial:
+    """A trial of region candidate `name` refitted to these scale factors of its fields."""
+    return Trial([name], 0.008, 1.0, 0.01, {f"region.{k}_scale": v for k, v in scales.items()})
 
+
+def test_region_refits_outside_the_candidates_range_are_not_that_physics(sheet):
     assert implausible(region("heavy_region", density=3.0), sheet) is None
     assert "x0.043" in implausible(region("heavy_region", density=0.043), sheet)   # the own-sim seam shrink's refit
     assert implausible(region("region_stiffness", stretch=0.1, bending=25.0), sheet) is None   # at the bound
@@ -177,19 +179,16 @@ def test_region_refits_outside_the_candidates_range_are_not_that_physics(sheet):
     assert implausible(region("rest_length_region", rest=0.3), sheet) is not None
 
 
-
 def test_region_refits_stopped_on_the_ranges_ends_in_every_field_are_refused(sheet):
     """The refit is held inside the range, so a fit that wants out stops on an end; with every field there it has
     no estimate inside (Blender's seam shrink s1: heavy region at density x0.1 in every fold)."""
-    def region(name: str, **scales: float) -> Trial:
-        return Trial([name], 0.008, 1.0, 0.01, {f"region.{k}_scale": v for k, v in scales.items()})
-
     assert "ends" in implausible(region("heavy_region", density=0.09999999999999998), sheet)
     assert "ends" in implausible(region("heavy_region", density=11.0), sheet)
     assert implausible(region("heavy_region", density=0.1001), sheet) is None        # searched, not stopped
     assert "ends" in implausible(region("rest_length_region", rest=0.5), sheet)
     assert "stretch x0.1, bending x201" in implausible(region("region_stiffness", stretch=0.1, bending=201.0), sheet)
     assert implausible(region("region_stiffness", stretch=0.1, bending=17.4), sheet) is None   # one field inside
+
 
 def test_a_none_reports_the_plausible_candidate_nearest_to_being_named():
     cv = CrossValidation([fold("arm", (0.00300, 0.00495), wind=(0.002904, 0.00399), body_friction=(0.0026, 0.0049),
