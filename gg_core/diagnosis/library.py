@@ -352,6 +352,7 @@ def _region_range(keys: tuple[str, ...], bounds: tuple[float, float]
     inside is kept: it may be a field the recordings do not pin (the stiff patch's stretch rolls out the same from
     x0.07 to x1.1, session 46) while the other carries the effect."""
     lo, hi = 1.0 + bounds[0], 1.0 + bounds[1]
+    ends = np.log([lo, hi])
 
     def check(values: dict[str, object], cloth: Cloth) -> str | None:
         scales = {key: float(values.get(region_value(key), 1.0)) for key in keys}
@@ -359,7 +360,6 @@ def _region_range(keys: tuple[str, ...], bounds: tuple[float, float]
             if not lo * (1.0 - 1e-3) <= scale <= hi * (1.0 + 1e-3):
                 return (f"the region's {key} refitted to x{scale:.3g}, outside this candidate's range "
                         f"x{lo:g}-x{hi:g}: the term stands in for something else")
-        ends = np.log([lo, hi])
         if all(np.abs(np.log(s) - ends).min() <= PINNED_LOG for s in scales.values()):
             fields = ", ".join(f"{key} x{scale:.3g}" for key, scale in scales.items())
             return (f"the region's refit stopped on the ends of this candidate's range x{lo:g}-x{hi:g} ({fields}): "
