@@ -50,6 +50,18 @@ region's axis reach 8.95; peeling the vertices the gradient of the teacher-force
 lengths points out (AUC 0.85 for the seam, 1 s) lowers the training rollouts on s1 / s2 / s3 by 13.5 / 5.2 / 2.6 %,
 held out by 9.6 / 3.5 % on s1 / s2 but raises it by 8.3 % on s3; on `none` s1 two vertices added at x1.018 lower
 held-out by 8 %. Changes of a few vertices are within the rollouts' sensitivity, so the patches stay the unit.
+
+Which single patches the rollouts also start from (session 58): the shares rank them one frame ahead, where a seam's
+middle barely shows; the fits' own loss, several frames ahead, ranks them by its gradient (patch_sensitivity, one
+adjoint pass, 10-15 s on the benchmark's skirt). Offline on Blender's seam shrinks s1 / s3 with the unloaded garment
+given (/work/data/s58/{probe,evalv,gradrank}.py: each fold's baseline fitted on its two training recordings, the
+region chosen on them alone, its held-out change at the training-best strength, nothing refitted): patches holding
+3 or more seam vertices rank at AUC 0.79-0.97 by sensitivity, 0.58-0.83 by share (the six folds); on s3's fold holding out the
+torso twist no start the shares proposed rolled the training recordings out better (no region, held-out +0 %),
+while its three most sensitive patches lie on the seam and the rollouts chose two of them (17 of 23 vertices on the
+seam, held out -20.1 %; the true seam -36.9 %). Four folds chose as before; s1's fold holding out the twist started
+from a patch the shares had ranked lower and grew less (-15.8 % against -20.2 %). Over the six folds -29.4 % against
+-26.8 %, the true seam -42.7 %.
 """
 from __future__ import annotations
 
@@ -206,11 +218,10 @@ def patch_sensitivity(cand: Candidate, sim: ImplicitSimulator, patch: np.ndarray
     one adjoint pass for every patch, the simulator restored after.
 
     Why beside the one-frame shares: a change in a seam's middle barely shows one frame ahead (module docstring),
-    several frames ahead it does. Measured offline (session 58, Blender's seam shrink s1 / s3, the unloaded garment
-    given, the folds' baselines): patches holding 3 or more seam vertices rank against the rest at AUC 0.80 / 0.79
-    (s1) and 0.89 / 0.97 (s3) by this sensitivity, 0.73 / 0.83 and 0.78 / 0.68 by their one-frame shares; on s3's
-    fold holding out the torso twist no start the shares proposed rolled the training recordings out better, so no
-    region was tried there, while the three most sensitive patches all lie on the seam."""
+    several frames ahead it does. Measured offline (session 58, Blender's seam shrinks s1 and s3, the unloaded
+    garment given, each fold's baseline): patches holding 3 or more seam vertices rank against the rest at AUC
+    0.86 / 0.79 / 0.80 (s1, holding out walk / twist / arm swing) and 0.88 / 0.97 / 0.89 (s3) by this sensitivity,
+    0.78 / 0.83 / 0.73 and 0.58 / 0.68 / 0.78 by their one-frame shares."""
     keys = tuple(cand.model(np.zeros(len(cand.coefficients)), None).region)
     cloth = sim.cloth
     saved = cloth.material, cloth.rest_lengths
