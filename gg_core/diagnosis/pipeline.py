@@ -71,8 +71,9 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     timings["selection_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    # a refit without any candidate (None), as long as the trials': trials are judged against equal optimization effort, so a gain cannot
-    # come from the baseline fit simply running longer; it and the candidates' refits are independent jobs
+    # a refit without any candidate (None), as long as the trials': trials are judged against equal optimization
+    # effort, so a gain cannot come from the baseline fit simply running longer; it and the candidates' refits are
+    # independent jobs
     proposed = propose(sel, req.min_inclusion, req.max_trials)
     jobs = [_TrialJob(n, None if n is None else sel.alone[n], sim, ctx if n is None else contexts[n], train, heldout,
                       attached, refit_config, req.probe_acceleration, baseline_l2, measured_lag(req.source, r))

@@ -55,13 +55,13 @@ Which single patches the rollouts also start from (session 58): the shares rank 
 middle barely shows; the fits' own loss, several frames ahead, ranks them by its gradient (patch_sensitivity, one
 adjoint pass, 10-15 s on the benchmark's skirt). Offline on Blender's seam shrinks s1 / s3 with the unloaded garment
 given (/work/data/s58/{probe,evalv,gradrank}.py: each fold's baseline fitted on its two training recordings, the
-region chosen on them alone, its held-out change at the training-best strength, nothing refitted): patches holding
-3 or more seam vertices rank at AUC 0.79-0.97 by sensitivity, 0.58-0.83 by share (the six folds); on s3's fold holding out the
-torso twist no start the shares proposed rolled the training recordings out better (no region, held-out +0 %),
-while its three most sensitive patches lie on the seam and the rollouts chose two of them (17 of 23 vertices on the
-seam, held out -20.1 %; the true seam -36.9 %). Four folds chose as before; s1's fold holding out the twist started
-from a patch the shares had ranked lower and grew less (-15.8 % against -20.2 %). Over the six folds -29.4 % against
--26.8 %, the true seam -42.7 %.
+region chosen on them alone, its held-out change at the training-best strength, nothing refitted, seed 1's pooling
+patches): patches holding 3 or more seam vertices rank at AUC 0.79-0.97 by sensitivity, 0.58-0.83 by share (the six
+folds); on s3's fold holding out the torso twist no start the shares proposed rolled the training recordings out
+better (no region, held-out unchanged), while its three most sensitive patches lie on the seam and the rollouts
+chose two of them (17 of 23 vertices on the seam, held out -20.1 %; the true seam -36.9 %). Four folds chose as
+before; s1's fold holding out the twist started from a patch the shares had ranked lower and grew less (-15.8 %
+against -20.2 %). Over the six folds -29.4 % against -26.8 %, the true seam -42.7 %.
 """
 from __future__ import annotations
 

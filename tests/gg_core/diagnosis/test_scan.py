@@ -76,14 +76,19 @@ def _sheet_sim(v: np.ndarray, f: np.ndarray, pinned: np.ndarray) -> ImplicitSimu
                              terms=make_terms(BASE_TERMS))
 
 
-def test_hidden_rest_length_change_on_a_strip_is_found_there():
+def _shrunk_strip() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[Observed], ImplicitSimulator]:
+    """(vertices, faces, pinned, strip, sequences, model): the swaying sheet with its side strip 5 % shorter at
+    rest, and a model of it with nothing changed."""
     v, f, pinned = hanging_sheet()
     strip = side_strip(v)
     truth = _sheet_sim(v, f, pinned)
     apply_region(truth.cloth, strip.astype(np.float64), {"rest": float(np.log(0.95))})
     truth.refresh()
-    sequences = _swaying(truth, v)
-    model = _sheet_sim(v, f, pinned)
+    return v, f, pinned, strip, _swaying(truth, v), _sheet_sim(v, f, pinned)
+
+
+def test_hidden_rest_length_change_on_a_strip_is_found_there():
+    v, f, pinned, strip, sequences, model = _shrunk_strip()
     batch = build_frames(model, sequences)
     res = residual(model, batch)
     pooling = make_pooling(model, batch, patch_vertices=5, window=4)
@@ -127,13 +132,7 @@ def _loss_at(sheet: tuple[np.ndarray, np.ndarray, np.ndarray], region: np.ndarra
 
 
 def test_the_training_loss_is_most_sensitive_to_the_patches_of_a_hidden_rest_length_change():
-    v, f, pinned = hanging_sheet()
-    strip = side_strip(v)
-    truth = _sheet_sim(v, f, pinned)
-    apply_region(truth.cloth, strip.astype(np.float64), {"rest": float(np.log(0.95))})
-    truth.refresh()
-    sequences = _swaying(truth, v)
-    model = _sheet_sim(v, f, pinned)
+    v, f, pinned, strip, sequences, model = _shrunk_strip()
     pooling = make_pooling(model, build_frames(model, sequences), patch_vertices=5, window=4)
     rest, material = model.cloth.rest_lengths.clone(), model.cloth.material
     sensitivity = patch_sensitivity(REST, model, pooling.patch, sequences, CONFIG)
