@@ -118,11 +118,10 @@ def region_value(field: str) -> str:
     return f"region.{field}_scale"
 
 
-def apply_region(cloth: Cloth, region: np.ndarray | torch.Tensor, logs: dict[str, torch.Tensor | float]) -> None:
+def apply_region(cloth: Cloth, region: np.ndarray, logs: dict[str, torch.Tensor | float]) -> None:
     """Scale the region's material and rest lengths by exp(log x weight), in place and differentiable in `logs`
-    ('density', 'stretch' = mu and lambda, 'bending', 'rest') and in the weights `region` [V] where a tensor
-    (scan.patch_sensitivity: a log-scale per pooling patch)."""
-    w = torch.as_tensor(region, dtype=torch.float64)
+    ('density', 'stretch' = mu and lambda, 'bending', 'rest')."""
+    w = torch.from_numpy(region)
 
     def scale(key: str) -> torch.Tensor:
         return torch.exp(torch.as_tensor(logs.get(key, 0.0), dtype=torch.float64) * w)
@@ -131,7 +130,7 @@ def apply_region(cloth: Cloth, region: np.ndarray | torch.Tensor, logs: dict[str
     cloth.material = Material(density=mat.density * scale("density"), mu=mat.mu * scale("stretch"),
                               lam=mat.lam * scale("stretch"), bending=mat.bending * scale("bending"))
     if "rest" in logs:
-        edge_w = w[torch.as_tensor(cloth.topology.edges, dtype=torch.long)].mean(1)
+        edge_w = torch.from_numpy(region[cloth.topology.edges].mean(1))
         cloth.rest_lengths = cloth.rest_lengths * torch.exp(torch.as_tensor(logs["rest"]) * edge_w)
 
 

@@ -57,9 +57,8 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
 
     t0 = time.perf_counter()
     ctx = Context.build(sim, r.batch, loc.region, r.predicted)
-    refit_config = fit_config(req, req.refit_iterations)
     scans = {c.name: scan_region(c, ctx, r.pooling, r.predicted, r.y, r.nuisance_cols, req.probe_acceleration,
-                                 train, attached, baseline_train_l2, refit_config)
+                                 train, attached, baseline_train_l2)
              for c in candidates if c.region_from == "scan"}
     contexts = {c.name: replace(ctx, region=scans[c.name].region) if c.name in scans else ctx for c in candidates}
     progress.step("region scan")
@@ -71,9 +70,9 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     timings["selection_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    # a refit without any candidate (None), as long as the trials': trials are judged against equal optimization
-    # effort, so a gain cannot come from the baseline fit simply running longer; it and the candidates' refits are
-    # independent jobs
+    # the same refit without any candidate: trials are judged against equal optimization effort, so a gain cannot
+    # come from the baseline fit simply running longer; it and the candidates' refits are independent jobs
+    refit_config = fit_config(req, req.refit_iterations)
     proposed = propose(sel, req.min_inclusion, req.max_trials)
     jobs = [_TrialJob(n, None if n is None else sel.alone[n], sim, ctx if n is None else contexts[n], train, heldout,
                       attached, refit_config, req.probe_acceleration, baseline_l2, measured_lag(req.source, r))
@@ -318,8 +317,7 @@ def _run_fold(job: _FoldJob, step: Step) -> Fold:
         ctx = Context.build(sim, r.batch, job.regions.get(n), r.predicted)
         if cand.region_from == "scan":
             ctx = replace(ctx, region=scan_region(cand, ctx, r.pooling, r.predicted, r.y, r.nuisance_cols,
-                                                  req.probe_acceleration, job.train, job.attached, train_l2,
-                                                  config).region)
+                                                  req.probe_acceleration, job.train, job.attached, train_l2).region)
             if ctx.region is None:
                 step(f"trial {n} without {held}: no region scanned on this fold's recordings")
                 continue

@@ -275,8 +275,7 @@ def _rolled_out(rollouts: dict | None) -> str:
     """How the scanned region's change rolled the training recordings out, where its rollouts chose it."""
     if not rollouts or rollouts["train_rollout_l2"] >= rollouts["train_rollout_l2_before"]:
         return ""
-    return (f"; the training rollouts chose it, grown from the patches the residual and the fit's loss proposed: "
-            f"a change of "
+    return (f"; the training rollouts chose it, grown from the patches the residual proposed: a change of "
             f"x{rollouts['scale']:.2f} there takes their error from {rollouts['train_rollout_l2_before'] * 1e3:.1f} "
             f"to {rollouts['train_rollout_l2'] * 1e3:.1f} mm before any refit")
 

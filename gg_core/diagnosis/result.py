@@ -159,7 +159,6 @@ class Result:
                                                      "patches": r.patches, "explained": r.explained,
                                                      "best_patch_explained": float(r.patch_explained.max()),
                                                      "one_frame_patches": r.one_frame_patches,
-                                                     "sensitive_patches": r.sensitive_patches,
                                                      "rollouts": None if r.region is None else {
                                                          "train_rollout_l2_before": r.rollout_l2_before,
                                                          "train_rollout_l2": r.rollout_l2,

@@ -51,30 +51,27 @@ lengths points out (AUC 0.85 for the seam, 1 s) lowers the training rollouts on 
 held out by 9.6 / 3.5 % on s1 / s2 but raises it by 8.3 % on s3; on `none` s1 two vertices added at x1.018 lower
 held-out by 8 %. Changes of a few vertices are within the rollouts' sensitivity, so the patches stay the unit.
 
-Which single patches the rollouts also start from (session 58): the shares rank them one frame ahead, where a seam's
-middle barely shows; the fits' own loss, several frames ahead, ranks them by its gradient (patch_sensitivity, one
-adjoint pass, 10-15 s on the benchmark's skirt). Offline on Blender's seam shrinks s1 / s3 with the unloaded garment
-given (/work/data/s58/{probe,evalv,gradrank}.py: each fold's baseline fitted on its two training recordings, the
-region chosen on them alone, its held-out change at the training-best strength, nothing refitted, seed 1's pooling
-patches): patches holding 3 or more seam vertices rank at AUC 0.79-0.97 by sensitivity, 0.58-0.83 by share (the six
-folds); on s3's fold holding out the torso twist no start the shares proposed rolled the training recordings out
-better (no region, held-out unchanged), while its three most sensitive patches lie on the seam and the rollouts
-chose two of them (17 of 23 vertices on the seam, held out -20.1 %; the true seam -36.9 %). Four folds chose as
-before; s1's fold holding out the twist started from a patch the shares had ranked lower and grew less (-15.8 %
-against -20.2 %). Over the six folds -29.4 % against -26.8 %, the true seam -42.7 %.
+Measured and not kept (session 58, 432aace, reverted): the rollouts also starting from the 4 patches the fits' own
+teacher-forced training loss is most sensitive to (one adjoint gradient in every patch's rest log-scale, 10-15 s;
+checked against central differences within 0.1-3 %). Offline on six folds of the seam shrinks s1 / s3 with the
+unloaded garment given (/work/data/s58/{probe,evalv,gradrank}.py), patches with 3 or more seam vertices ranked at
+AUC 0.79-0.97 by it against 0.58-0.83 by the one-frame share, and s3's fold holding out the twist, where no share
+seed rolled the training recordings out better, found the seam (held out -20.1 %, the true seam -36.9 %); but s1's
+twist fold lost (-20.2 -> -15.8 %) and the six-fold mean moved only -26.8 -> -29.4 %. End to end (gg bench diagnose
+--rest-given, 20 steps) s3 fell from -29.9 % over the folds (session 55) to -24.6 % (-41.6 / -26.3 / -5.9 %, the
+true seam -42.0 %; a one-patch region of 12 vertices, 5 on the seam) and `none` s1 chose a sensitive patch that
+rolled the training recordings out 7.9 % better and the held-out one 1.9 % worse (verdict none). Choosing the region
+by the worst per-recording training ratio or the geometric mean instead of the mean changed no region.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
 import numpy as np
-import torch
 
-from ..physics.cloth import Cloth
-from ..physics.fitting import FitConfig, Observed, TeacherForced, mean_rollout_error
-from ..physics.simulator import ImplicitSimulator
-from .confirm import CandidateParams, golden_section
-from .library import Candidate, Context, applied, apply_region
+from ..physics.fitting import Observed, mean_rollout_error
+from .confirm import golden_section
+from .library import Candidate, Context, applied
 from .localize import REGION_MAX_FRACTION
 from .residuals import Pooling, responses
 from .selection import Design, explained_share, fit, gram
@@ -87,7 +84,6 @@ GROWTH_SHARE = 0.01     # share of the residual a neighbouring patch must add to
 # gains 36 % held-out)
 MIN_SHARE = GROWTH_SHARE
 ROLLOUT_SEEDS = 4          # single patches, those explaining most alone, tried on the rollouts beside the region
-GRADIENT_SEEDS = 4         # and those the training loss is most sensitive to (patch_sensitivity)
 ROLLOUT_GROWTH = 0.01      # relative drop of the training rollout error a neighbouring patch must bring to join
 STRENGTH_EVALUATIONS = 8   # rollouts of a golden-section search for a region's strength
 GROWTH_EVALUATIONS = 5     # and for a grown region's, between none and the strength before it grew
@@ -103,7 +99,6 @@ class ScanResult:
     rollout_l2_before: float     # training rollout error of the baseline (m), NaN where nothing was rolled out
     rollout_l2: float            # of the baseline with the chosen region changed, at its best strength
     strength: float              # that change as a log-scale of the candidate's fields
-    sensitive_patches: list[int]   # the patches the training loss is most sensitive to (patch_sensitivity)
 
 
 def patch_adjacency(patch: np.ndarray, edges: np.ndarray) -> list[set[int]]:
@@ -158,13 +153,11 @@ def grow(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarr
 
 def scan_region(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.ndarray, y: np.ndarray,
                 nuisance: np.ndarray, acceleration: float, train: list[Observed], pinned: np.ndarray,
-                train_l2: float, config: FitConfig) -> ScanResult:
+                train_l2: float) -> ScanResult:
     """The region of `cand` (a region candidate) from its response on each pooling patch, chosen on the rollouts
     of the training recordings `train` (rollout_region), which the unchanged simulator rolls out `train_l2` (m) off
     (the baseline fit measured it); `y` and `nuisance` are the pooled residual rows and nuisance columns of the
-    selection, `predicted` the unchanged one-frame prediction. The rollouts start from the one-frame region, the
-    ROLLOUT_SEEDS patches explaining most alone and the GRADIENT_SEEDS patches the fits' loss on `train` (`config`)
-    is most sensitive to (patch_sensitivity)."""
+    selection, `predicted` the unchanged one-frame prediction."""
     columns_arr = np.zeros((pooling.n_patches, len(y), len(cand.coefficients)))
     for p in range(pooling.n_patches):
         probes = cand.probes(replace(ctx, region=(pooling.patch == p).astype(np.float64)), acceleration)
@@ -180,59 +173,13 @@ def scan_region(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.n
     base = nuisance_rss(y, nuisance, groups)
     chosen, share, alone = grow(cand, y, nuisance, columns_arr, groups, base, neighbours, max_patches, MIN_SHARE)
     if not chosen:
-        return ScanResult(None, [], share, alone, [], float("nan"), float("nan"), 0.0, [])
-    sensitive = [int(p) for p in np.argsort(-patch_sensitivity(cand, ctx.sim, pooling.patch, train, config))
-                 [:GRADIENT_SEEDS]]
-    seeds: list[list[int]] = []
-    for p in [*(int(p) for p in np.argsort(-alone)[:ROLLOUT_SEEDS]), *sensitive]:
-        if [p] != chosen and [p] not in seeds:
-            seeds.append([p])
+        return ScanResult(None, [], share, alone, [], float("nan"), float("nan"), 0.0)
+    seeds = [[int(p)] for p in np.argsort(-alone)[:ROLLOUT_SEEDS] if [int(p)] != chosen]
     rolled = rollout_region(cand, ctx, pooling.patch, [chosen, *seeds], neighbours, max_patches, train, pinned,
                             train_l2)
     explained = _share(cand, y, nuisance, columns_arr[rolled.patches].sum(0), groups, base)
     return ScanResult(np.isin(pooling.patch, rolled.patches).astype(np.float64), rolled.patches, explained, alone,
-                      chosen, rolled.before, rolled.error, rolled.strength, sensitive)
-
-
-class _PatchScales(CandidateParams):
-    """The baseline's parameters and a log-scale of each of the candidate's region fields on every pooling patch
-    (all zero: the baseline itself), so that one gradient of the training loss ranks every patch."""
-
-    def __init__(self, sim: ImplicitSimulator, keys: tuple[str, ...], patch: np.ndarray) -> None:
-        super().__init__(sim.cloth, sim, (), None, {})
-        n = int(patch.max()) + 1
-        self.member = torch.from_numpy((patch[:, None] == np.arange(n)).astype(np.float64))   # [V,P]; pinned: none
-        self.keys = keys
-        self.patch_s = torch.zeros(len(keys), n, dtype=torch.float64)
-
-    def apply(self, cloth: Cloth) -> None:
-        super().apply(cloth)
-        for key, s in zip(self.keys, self.patch_s):
-            apply_region(cloth, self.member @ s, {key: 1.0})
-
-
-def patch_sensitivity(cand: Candidate, sim: ImplicitSimulator, patch: np.ndarray, train: list[Observed],
-                      config: FitConfig) -> np.ndarray:
-    """[P] the norm over the candidate's region fields of the gradient of the fits' own teacher-forced loss on
-    `train` (config: samples, seed, horizon) w.r.t. each pooling patch's log-scale, at the unchanged simulator:
-    one adjoint pass for every patch, the simulator restored after.
-
-    Why beside the one-frame shares: a change in a seam's middle barely shows one frame ahead (module docstring),
-    several frames ahead it does. Measured offline (session 58, Blender's seam shrinks s1 and s3, the unloaded
-    garment given, each fold's baseline): patches holding 3 or more seam vertices rank against the rest at AUC
-    0.86 / 0.79 / 0.80 (s1, holding out walk / twist / arm swing) and 0.88 / 0.97 / 0.89 (s3) by this sensitivity,
-    0.78 / 0.83 / 0.73 and 0.58 / 0.68 / 0.78 by their one-frame shares."""
-    keys = tuple(cand.model(np.zeros(len(cand.coefficients)), None).region)
-    cloth = sim.cloth
-    saved = cloth.material, cloth.rest_lengths
-    try:
-        params = _PatchScales(sim, keys, patch)
-        problem = TeacherForced(sim, train, config.max_samples, config.seed, horizon=config.horizon)
-        grad = problem.evaluate(params, [params.patch_s])[2][0]
-    finally:
-        cloth.material, cloth.rest_lengths = saved
-        sim.refresh()
-    return np.linalg.norm(grad.numpy(), axis=0)
+                      chosen, rolled.before, rolled.error, rolled.strength)
 
 
 @dataclass

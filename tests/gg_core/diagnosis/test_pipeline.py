@@ -93,21 +93,20 @@ def test_a_fold_scans_its_own_training_recordings_for_a_scanned_region(monkeypat
         tried[cand.name] = ctx.region
         return Trial([cand.name], 0.004, 1.0, 0.003)
 
-    def fake_scan(cand, ctx, pooling, predicted, y, nuisance, acceleration, fit_on, attached, train_l2, config):
-        scanned.append((cand.name, pooling, [o.name for o in fit_on], ctx.region, train_l2, config))
+    def fake_scan(cand, ctx, pooling, predicted, y, nuisance, acceleration, fit_on, attached, train_l2):
+        scanned.append((cand.name, pooling, [o.name for o in fit_on], ctx.region, train_l2))
         return SimpleNamespace(region=found)
 
     monkeypatch.setattr(pipeline, "trial_from_starts", fake_trial)
     monkeypatch.setattr(pipeline, "scan_region", fake_scan)
     req = SimpleNamespace(seed=0, refit_iterations=1, probe_acceleration=0.5, source="ground truth")
-    monkeypatch.setattr(pipeline, "fit_config", lambda *a: "the fold's fit config")
+    monkeypatch.setattr(pipeline, "fit_config", lambda *a: None)
     split_region, found = np.array([1.0, 0.0]), np.array([0.0, 1.0])
     job = pipeline._FoldJob(req, train, heldout, None, None, None, None, None,
                             ["rest_length_region", "heavy_region"],
                             {"heavy_region": split_region}, None)
     fold = pipeline._run_fold(job, lambda msg: None)
-    # its baseline's training rollout error, and the fits' config for the loss the scan's sensitivity ranks by
-    assert scanned == [("rest_length_region", "the fold's pooling", ["a", "b"], None, 0.004, "the fold's fit config")]
+    assert scanned == [("rest_length_region", "the fold's pooling", ["a", "b"], None, 0.004)]   # its baseline's
     assert tried["rest_length_region"] is found and tried["heavy_region"] is split_region
     assert set(fold.trials) == {"rest_length_region", "heavy_region"} and fold.heldout == ["c"]
     found = None                                    # this fold's scan finds no region: the candidate is not tried

@@ -101,9 +101,8 @@ def testregion_sentence_says_where_each_region_candidate_acted():
                              "scanned_regions": scanned})
     assert text.startswith("Region candidates act on 2 vertices, singled out because it stretches differently")
     assert "rest_length_region scanned the garment patch by patch and acts on 3 vertices (2 patches)" in text
-    assert ("12.3 % of the residual; the training rollouts chose it, grown from the patches the residual and the "
-            "fit's loss proposed: a change of x0.89 there takes their error from 12.2 to 9.4 mm before any refit."
-            ) in text
+    assert ("12.3 % of the residual; the training rollouts chose it, grown from the patches the residual "
+            "proposed: a change of x0.89 there takes their error from 12.2 to 9.4 mm before any refit.") in text
     rolled["train_rollout_l2"] = 0.0122          # no change rolled out better: the rollouts chose nothing
     assert "12.3 % of the residual. " in region_sentence({"scanned_regions": scanned})
     assert "heavy_region scanned the garment patch by patch: no patch explains enough of the residual (best 1.0 %)" \

@@ -1,29 +1,23 @@
 """Region scan: growing a region over neighbouring patches finds the patches the residual came from and nothing in
-noise; on our own simulator, a hidden rest-length change on a strip of a hanging sheet is found on that strip, the
-training loss is most sensitive to the strip's patches (its gradient in every patch's scale at once, checked against
-finite differences), and the training rollouts choose the start on the strip over one off it, and nothing where
-nothing is hidden."""
+noise; on our own simulator, a hidden rest-length change on a strip of a hanging sheet is found on that strip, and
+the training rollouts choose the start on the strip over one off it, and nothing where nothing is hidden."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from diagnosis_helpers import MATERIAL, hanging_sheet, side_strip
 
 from gg_core.diagnosis.library import BY_NAME, Context, apply_region
 from gg_core.diagnosis.residuals import build_frames, make_pooling, residual
-from gg_core.diagnosis.confirm import CandidateParams
-from gg_core.diagnosis.scan import (MIN_SHARE, grow, nuisance_rss, patch_adjacency, patch_sensitivity, rollout_region,
-                                    scan_region)
+from gg_core.diagnosis.scan import MIN_SHARE, grow, nuisance_rss, patch_adjacency, rollout_region, scan_region
 from gg_core.physics.cloth import Cloth
-from gg_core.physics.fitting import FitConfig, Observed, TeacherForced, mean_rollout_error
+from gg_core.physics.fitting import Observed, mean_rollout_error
 from gg_core.physics.forces import make_terms
 from gg_core.physics.material import Material
 from gg_core.physics.simulator import ClothState, ImplicitSimulator
 
 REST = BY_NAME["rest_length_region"]
-CONFIG = FitConfig(max_samples=8, horizon=2)
 
 
 def test_patch_adjacency_joins_patches_that_share_an_edge():
@@ -76,19 +70,14 @@ def _sheet_sim(v: np.ndarray, f: np.ndarray, pinned: np.ndarray) -> ImplicitSimu
                              terms=make_terms(BASE_TERMS))
 
 
-def _shrunk_strip() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, list[Observed], ImplicitSimulator]:
-    """(vertices, faces, pinned, strip, sequences, model): the swaying sheet with its side strip 5 % shorter at
-    rest, and a model of it with nothing changed."""
+def test_hidden_rest_length_change_on_a_strip_is_found_there():
     v, f, pinned = hanging_sheet()
     strip = side_strip(v)
     truth = _sheet_sim(v, f, pinned)
     apply_region(truth.cloth, strip.astype(np.float64), {"rest": float(np.log(0.95))})
     truth.refresh()
-    return v, f, pinned, strip, _swaying(truth, v), _sheet_sim(v, f, pinned)
-
-
-def test_hidden_rest_length_change_on_a_strip_is_found_there():
-    v, f, pinned, strip, sequences, model = _shrunk_strip()
+    sequences = _swaying(truth, v)
+    model = _sheet_sim(v, f, pinned)
     batch = build_frames(model, sequences)
     res = residual(model, batch)
     pooling = make_pooling(model, batch, patch_vertices=5, window=4)
@@ -96,7 +85,7 @@ def test_hidden_rest_length_change_on_a_strip_is_found_there():
     ctx = Context.build(model, batch)
     before = mean_rollout_error(model, sequences, pinned)
     result = scan_region(REST, ctx, pooling, batch.x_next - res, y, np.ones((len(y), 1)), 0.5, sequences, pinned,
-                         before, CONFIG)
+                         before)
     assert result.region is not None and result.explained > 0.5
     found = result.region > 0
     on_strip = strip & (model.num.free > 0)
@@ -105,8 +94,6 @@ def test_hidden_rest_length_change_on_a_strip_is_found_there():
     assert result.patch_explained.argmax() in set(pooling.patch[on_strip])
     assert result.rollout_l2_before == before
     assert result.rollout_l2 < 0.5 * before and result.strength < 0     # a shrink rolls out better
-    strip_patches = set(pooling.patch[on_strip].tolist())
-    assert set(result.sensitive_patches[:len(strip_patches)]) == strip_patches    # the most sensitive first
 
     off = [int(p) for p in set(pooling.patch[~strip & (model.num.free > 0)]) - set(pooling.patch[strip])]
     neighbours = patch_adjacency(pooling.patch, model.num.edges)
@@ -119,33 +106,3 @@ def test_hidden_rest_length_change_on_a_strip_is_found_there():
     calm = mean_rollout_error(model, still, pinned)
     rolled = rollout_region(REST, ctx, pooling.patch, [[off[0]], [on]], neighbours, 4, still, pinned, calm)
     assert rolled.patches == [off[0]] and rolled.strength == 0.0 and rolled.error == rolled.before == calm
-
-
-def _loss_at(sheet: tuple[np.ndarray, np.ndarray, np.ndarray], region: np.ndarray, log_scale: float,
-             sequences: list[Observed]) -> float:
-    """The teacher-forced loss of CONFIG with the rest lengths on `region` scaled by exp(log_scale), on a fresh
-    simulator of the `sheet` (evaluating leaves its parameters applied)."""
-    sim = _sheet_sim(*sheet)
-    params = CandidateParams(sim.cloth, sim, (), region, {"rest": log_scale})
-    return TeacherForced(sim, sequences, CONFIG.max_samples, CONFIG.seed, horizon=CONFIG.horizon
-                         ).evaluate(params, [])[0]
-
-
-def test_the_training_loss_is_most_sensitive_to_the_patches_of_a_hidden_rest_length_change():
-    v, f, pinned, strip, sequences, model = _shrunk_strip()
-    pooling = make_pooling(model, build_frames(model, sequences), patch_vertices=5, window=4)
-    rest, material = model.cloth.rest_lengths.clone(), model.cloth.material
-    sensitivity = patch_sensitivity(REST, model, pooling.patch, sequences, CONFIG)
-    assert torch.equal(model.cloth.rest_lengths, rest) and model.cloth.material is material   # restored
-
-    on = set(pooling.patch[strip & (model.num.free > 0)].tolist())
-    assert set(np.argsort(-sensitivity)[:len(on)].tolist()) == on
-    p = int(np.argmax(sensitivity))          # the gradient, against central differences of the same loss
-    region = (pooling.patch == p).astype(np.float64)
-    eps = 1e-4
-    slope = (_loss_at((v, f, pinned), region, eps, sequences) - _loss_at((v, f, pinned), region, -eps, sequences)
-             ) / (2 * eps)
-    assert sensitivity[p] == pytest.approx(abs(slope), rel=0.02)
-
-    still = _swaying(model, v)               # nothing hidden: the model is at the loss's minimum
-    assert patch_sensitivity(REST, model, pooling.patch, still, CONFIG).max() < 1e-3 * sensitivity.max()
