@@ -103,7 +103,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     cv = CrossValidation(folds)
     by_rollouts = cv.ranked([n for n in first.trials if cv.confirmed(n, req.min_gain, req.min_gain_mm)
                              and n not in unphysical])
-    passing = named_first(cv, by_rollouts, sel, req.min_inclusion)
+    passing = named_first(cv, by_rollouts, sel, req.min_inclusion, req.min_gain)
     rollouts_first = by_rollouts[0] if by_rollouts and passing[0] != by_rollouts[0] else None
     timings["folds_s"] = time.perf_counter() - t0
 
@@ -146,7 +146,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     baseline["held_material"] = list(params.held)
     baseline.update({f"train_rollout_lag_{axis}_mm": 1e3 * float(r.lag[k]) for axis, k in (("x", 0), ("z", 2))})
     baseline.update(starts)
-    rivals = unresolved(cv, passing) if len(accepted) == 1 and not rollouts_first else []
+    rivals = unresolved(cv, passing, req.min_gain) if len(accepted) == 1 and not rollouts_first else []
     return Result(loc, sel, trials, accepted, null, null_refit, after, baseline,
                   dict(zip(r.labels, r.adjust.tolist())), r.batch, unphysical, progress, cv, reference, timings, scans,
                   withheld, rollouts_first, rivals, delivered, delivered_sim,

@@ -62,7 +62,8 @@ def selected(sel: Selection, min_inclusion: float) -> list[str]:
     return [n for n in sel.order if sel.inclusion[n] >= min_inclusion]
 
 
-def named_first(cv: CrossValidation, by_rollouts: list[str], sel: Selection, min_inclusion: float) -> list[str]:
+def named_first(cv: CrossValidation, by_rollouts: list[str], sel: Selection, min_inclusion: float,
+                min_gain: float) -> list[str]:
     """The confirmed candidates `by_rollouts` in the order they are accepted: the residual breaks a tie the folds
     leave (CrossValidation.residual_tie_break), but only with a candidate its forward selection chose with bootstrap
     inclusion >= `min_inclusion`, the bar a candidate's residual evidence must clear to be tried first (propose).
@@ -79,25 +80,27 @@ def named_first(cv: CrossValidation, by_rollouts: list[str], sel: Selection, min
     replicates (Selection.preference): registration error lowers every candidate's share below the selection's
     bar together, the paired comparison keeps which pattern fits better. See RESIDUAL_PREFERENCE."""
     chosen = selected(sel, min_inclusion)
-    ranked = cv.residual_tie_break(by_rollouts, chosen)
+    ranked = cv.residual_tie_break(by_rollouts, chosen, min_gain)
     if not ranked or ranked[0] != by_rollouts[0] or ranked[0] in chosen:
         return ranked
     lead = ranked[0]
-    rivals = [n for n in ranked[1:] if not cv.separated(lead, n) and sel.preference(n, lead) >= RESIDUAL_PREFERENCE]
+    rivals = [n for n in ranked[1:]
+              if not cv.separated(lead, n, min_gain) and sel.preference(n, lead) >= RESIDUAL_PREFERENCE]
     if not rivals:
         return ranked
     first = max(rivals, key=lambda n: sel.preference(n, lead))
     return [first] + [n for n in ranked if n != first]
 
 
-def unresolved(cv: CrossValidation, passing: list[str]) -> list[str]:
+def unresolved(cv: CrossValidation, passing: list[str], min_gain: float) -> list[str]:
     """The confirmed candidates of other equivalence classes than the first of `passing` that the folds do not
     separate from it (CrossValidation.separated): where neither the rollouts nor the residual chose, the report
     says the recordings leave the class open instead of naming one as if it were certain."""
     if not passing:
         return []
     lead = BY_NAME[passing[0]]
-    return [n for n in passing[1:] if BY_NAME[n].equivalence != lead.equivalence and not cv.separated(lead.name, n)]
+    return [n for n in passing[1:] if BY_NAME[n].equivalence != lead.equivalence
+            and not cv.separated(lead.name, n, min_gain)]
 
 
 def propose(sel: Selection, min_inclusion: float, max_trials: int) -> list[str]:

@@ -45,10 +45,11 @@ def test_only_a_candidate_the_selection_chose_can_break_the_folds_tie():
     assert by_rollouts == ["gravity_offset", "wind"]
     explained = {"wind": 0.074, "gravity_offset": 0.071}
     unstable = Selection(1.0, ["wind"], explained, {}, {}, inclusion={"wind": 0.4, "gravity_offset": 0.3})
-    assert named_first(cv, by_rollouts, unstable, 0.5) == ["gravity_offset", "wind"]
-    assert cv.residual_tie_break(by_rollouts, propose(unstable, 0.5, 12))[0] == "wind"    # the explained share would
+    assert named_first(cv, by_rollouts, unstable, 0.5, 0.10) == ["gravity_offset", "wind"]
+    # the explained share would name wind
+    assert cv.residual_tie_break(by_rollouts, propose(unstable, 0.5, 12), 0.10)[0] == "wind"
     stable = Selection(1.0, ["wind"], explained, {}, {}, inclusion={"wind": 1.0, "gravity_offset": 0.05})
-    assert named_first(cv, by_rollouts, stable, 0.5) == ["wind", "gravity_offset"]
+    assert named_first(cv, by_rollouts, stable, 0.5, 0.10) == ["wind", "gravity_offset"]
 
 
 def _registered_tie() -> tuple[CrossValidation, list[str]]:
@@ -68,45 +69,45 @@ def _shares(tilt_ahead: float) -> dict[str, np.ndarray]:
 
 def test_a_consistent_residual_preference_breaks_a_tie_the_selection_chose_nothing_in():
     cv, by_rollouts = _registered_tie()
-    assert by_rollouts == ["wind", "gravity_offset"] and not cv.separated("wind", "gravity_offset")
+    assert by_rollouts == ["wind", "gravity_offset"] and not cv.separated("wind", "gravity_offset", 0.10)
     explained = {"wind": 0.037, "gravity_offset": 0.045}
     weak = Selection(1.0, [], explained, {}, {}, inclusion={"wind": 0.0, "gravity_offset": 0.32}, shares=_shares(0.96))
-    assert named_first(cv, by_rollouts, weak, 0.5) == ["gravity_offset", "wind"]
+    assert named_first(cv, by_rollouts, weak, 0.5, 0.10) == ["gravity_offset", "wind"]
     assert weak.preference("gravity_offset", "wind") == pytest.approx(0.96)
     unsure = Selection(1.0, [], explained, {}, {}, inclusion=weak.inclusion, shares=_shares(0.9))
-    assert named_first(cv, by_rollouts, unsure, 0.5) == by_rollouts           # below RESIDUAL_PREFERENCE
+    assert named_first(cv, by_rollouts, unsure, 0.5, 0.10) == by_rollouts     # below RESIDUAL_PREFERENCE
     lead_chosen = Selection(1.0, ["wind"], explained, {}, {}, inclusion={"wind": 0.6, "gravity_offset": 0.32},
                             shares=_shares(0.96))
-    assert named_first(cv, by_rollouts, lead_chosen, 0.5) == by_rollouts      # the selection agrees with the lead
+    assert named_first(cv, by_rollouts, lead_chosen, 0.5, 0.10) == by_rollouts  # the selection agrees with the lead
     clear = CrossValidation([fold(f.heldout[0], (f.reference.heldout_l2, f.reference.train_l2),
                                   wind=(f.trials["wind"].heldout_l2 * 0.8, f.trials["wind"].train_l2 * 0.8),
                                   gravity_offset=(f.trials["gravity_offset"].heldout_l2,
                                                   f.trials["gravity_offset"].train_l2)) for f in cv.folds])
-    assert named_first(clear, clear.ranked(["wind", "gravity_offset"]), weak, 0.5)[0] == "wind"   # folds separate
+    assert named_first(clear, clear.ranked(["wind", "gravity_offset"]), weak, 0.5, 0.10)[0] == "wind"  # folds separate
 
 
 def test_rivals_the_folds_do_not_separate_are_reported_as_unresolved():
     cv, by_rollouts = _registered_tie()
-    assert unresolved(cv, by_rollouts) == ["gravity_offset"]
-    assert unresolved(cv, []) == []
+    assert unresolved(cv, by_rollouts, 0.10) == ["gravity_offset"]
+    assert unresolved(cv, [], 0.10) == []
     ahead = CrossValidation([fold(f.heldout[0], (f.reference.heldout_l2, f.reference.train_l2),
                                   wind=(f.trials["wind"].heldout_l2 * 0.8, f.trials["wind"].train_l2 * 0.8),
                                   gravity_offset=(f.trials["gravity_offset"].heldout_l2,
                                                   f.trials["gravity_offset"].train_l2)) for f in cv.folds])
-    assert unresolved(ahead, ["wind", "gravity_offset"]) == []              # wind better in every fold
+    assert unresolved(ahead, ["wind", "gravity_offset"], 0.10) == []        # wind better in every fold
     same_class = CrossValidation([fold(f.heldout[0], (f.reference.heldout_l2, f.reference.train_l2),
                                        mass_damping=(0.009, 0.009), air_drag=(0.009, 0.009)) for f in cv.folds])
     assert BY_NAME["mass_damping"].equivalence != BY_NAME["air_drag"].equivalence
-    assert unresolved(same_class, ["mass_damping", "air_drag"]) == ["air_drag"]
+    assert unresolved(same_class, ["mass_damping", "air_drag"], 0.10) == ["air_drag"]
 
 
 def test_confirmation_needs_the_heldout_gain_and_better_training_rollouts():
     null = Trial([], heldout_l2=0.010, train_loss=1.0, train_l2=0.012)
     assert confirmed(Trial(["a"], 0.0085, 1.0, 0.011), null, 0.10, 0.5)
-    assert not confirmed(Trial(["a"], 0.0095, 1.0, 0.011), null, 0.10, 0.5)    # held-out gain 5 % < 10 %
-    assert not confirmed(Trial(["a"], 0.0080, 1.0, 0.0125), null, 0.10, 0.5)   # lucky on the held-out sequence only
+    assert not confirmed(Trial(["a"], 0.0095, 1.0, 0.011), null, 0.10, 0.5)  # held-out gain 5 % < 10 %
+    assert not confirmed(Trial(["a"], 0.0080, 1.0, 0.0125), null, 0.10, 0.5)  # lucky on the held-out sequence only
     tiny = Trial([], 0.00022, 1.0, 0.0002)                              # the baseline already matches
-    assert not confirmed(Trial(["a"], 0.00011, 1.0, 0.0001), tiny, 0.10, 0.25)   # 51 %, but 0.11 mm
+    assert not confirmed(Trial(["a"], 0.00011, 1.0, 0.0001), tiny, 0.10, 0.25)  # 51 %, but 0.11 mm
     small = Trial([], 0.00129, 1.0, 0.0048)                             # hidden friction, rest mesh given
     friction = Trial(["body_friction"], 0.00094, 1.0, 0.0039)           # 27 %, 0.35 mm
     assert confirmed(friction, small, 0.10, 0.25) and not confirmed(friction, small, 0.10, 0.5)
@@ -200,8 +201,8 @@ def test_a_none_reports_the_plausible_candidate_nearest_to_being_named():
     assert [f["heldout"] for f in near["folds"]] == [["arm"], ["walk"]]
     assert near["why_not"] == cv.shortfalls("wind", 0.10, 0.25) and near["min_gain"] == 0.10 and near["near_miss"]
     split_only = CrossValidation([fold("arm", (0.010, 0.010), wind=(0.0104, 0.009), mass_damping=(0.0101, 0.011))])
-    least_worse = closest(split_only, {}, 0.10, 0.25)      # every candidate worse: the least worse, no near miss
+    least_worse = closest(split_only, {}, 0.10, 0.25)  # every candidate worse: the least worse, no near miss
     assert least_worse["name"] == "mass_damping" and not least_worse["near_miss"]
     gained = CrossValidation([fold("arm", (0.010, 0.010), wind=(0.009, 0.009))])
-    assert not closest(gained, {}, 0.10, 0.25)["near_miss"]   # a gain on the split alone is no near miss
+    assert not closest(gained, {}, 0.10, 0.25)["near_miss"]  # a gain on the split alone is no near miss
     assert closest(split_only, {"wind": "x", "mass_damping": "y"}, 0.10, 0.25) is None
