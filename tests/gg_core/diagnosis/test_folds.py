@@ -30,10 +30,10 @@ def test_confirmation_is_on_the_mean_heldout_gain_with_most_folds_improving():
                           fold("twist", (0.010, 0.010), air=(0.0070, 0.0080), wind=(0.0090, 0.0095))])
     assert cv.mean_gains("air") == pytest.approx((0.68 / 3, 0.65 / 3))
     assert cv.confirmed("air", 0.10, 0.25)
-    assert cv.confirmed("air", 0.10, 0.25)     # the arm swing alone does not show it: most folds do
-    assert not cv.confirmed("wind", 0.10, 0.25)  # mean 5 % held-out, and worse without the walk
+    assert cv.confirmed("air", 0.10, 0.25)           # the arm swing alone does not show it: most folds do
+    assert not cv.confirmed("wind", 0.10, 0.25)       # mean 5 % held-out, and worse without the walk
     assert not cv.confirmed("air", 0.30, 0.25)
-    assert not cv.confirmed("air", 0.10, 3.0)   # 2.5 mm on average: under a 3 mm floor
+    assert not cv.confirmed("air", 0.10, 3.0)         # 2.5 mm on average: under a 3 mm floor
     lucky = CrossValidation([fold("arm", (0.010, 0.010), x=(0.005, 0.009)),
                              fold("walk", (0.010, 0.010), x=(0.006, 0.011))])   # training worse without the walk
     assert not lucky.confirmed("x", 0.10, 0.25)
@@ -68,7 +68,7 @@ def test_a_candidate_missing_from_a_fold_is_not_confirmed_and_one_fold_is_the_gi
     assert cv.confirmed("air", 0.10, 0.25) and not cv.complete("tilt") and not cv.confirmed("tilt", 0.10, 0.25)
     alone = CrossValidation([fold("arm", (0.010, 0.012), a=(0.0085, 0.011), b=(0.0095, 0.011),
                                   c=(0.0080, 0.0125))])
-    assert [n for n in "abc" if alone.confirmed(n, 0.10, 0.5)] == ["a"]  # b: 5 % held-out; c: training worse
+    assert [n for n in "abc" if alone.confirmed(n, 0.10, 0.5)] == ["a"]   # b: 5 % held-out; c: training worse
 
 
 def test_confirmed_candidates_are_ranked_by_the_smaller_of_their_mean_gains():

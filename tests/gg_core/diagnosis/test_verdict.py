@@ -104,10 +104,10 @@ def test_rivals_the_folds_do_not_separate_are_reported_as_unresolved():
 def test_confirmation_needs_the_heldout_gain_and_better_training_rollouts():
     null = Trial([], heldout_l2=0.010, train_loss=1.0, train_l2=0.012)
     assert confirmed(Trial(["a"], 0.0085, 1.0, 0.011), null, 0.10, 0.5)
-    assert not confirmed(Trial(["a"], 0.0095, 1.0, 0.011), null, 0.10, 0.5)  # held-out gain 5 % < 10 %
-    assert not confirmed(Trial(["a"], 0.0080, 1.0, 0.0125), null, 0.10, 0.5)  # lucky on the held-out sequence only
+    assert not confirmed(Trial(["a"], 0.0095, 1.0, 0.011), null, 0.10, 0.5)    # held-out gain 5 % < 10 %
+    assert not confirmed(Trial(["a"], 0.0080, 1.0, 0.0125), null, 0.10, 0.5)   # lucky on the held-out sequence only
     tiny = Trial([], 0.00022, 1.0, 0.0002)                              # the baseline already matches
-    assert not confirmed(Trial(["a"], 0.00011, 1.0, 0.0001), tiny, 0.10, 0.25)  # 51 %, but 0.11 mm
+    assert not confirmed(Trial(["a"], 0.00011, 1.0, 0.0001), tiny, 0.10, 0.25)   # 51 %, but 0.11 mm
     small = Trial([], 0.00129, 1.0, 0.0048)                             # hidden friction, rest mesh given
     friction = Trial(["body_friction"], 0.00094, 1.0, 0.0039)           # 27 %, 0.35 mm
     assert confirmed(friction, small, 0.10, 0.25) and not confirmed(friction, small, 0.10, 0.5)
@@ -201,8 +201,8 @@ def test_a_none_reports_the_plausible_candidate_nearest_to_being_named():
     assert [f["heldout"] for f in near["folds"]] == [["arm"], ["walk"]]
     assert near["why_not"] == cv.shortfalls("wind", 0.10, 0.25) and near["min_gain"] == 0.10 and near["near_miss"]
     split_only = CrossValidation([fold("arm", (0.010, 0.010), wind=(0.0104, 0.009), mass_damping=(0.0101, 0.011))])
-    least_worse = closest(split_only, {}, 0.10, 0.25)  # every candidate worse: the least worse, no near miss
+    least_worse = closest(split_only, {}, 0.10, 0.25)      # every candidate worse: the least worse, no near miss
     assert least_worse["name"] == "mass_damping" and not least_worse["near_miss"]
     gained = CrossValidation([fold("arm", (0.010, 0.010), wind=(0.009, 0.009))])
-    assert not closest(gained, {}, 0.10, 0.25)["near_miss"]  # a gain on the split alone is no near miss
+    assert not closest(gained, {}, 0.10, 0.25)["near_miss"]   # a gain on the split alone is no near miss
     assert closest(split_only, {"wind": "x", "mass_damping": "y"}, 0.10, 0.25) is None
