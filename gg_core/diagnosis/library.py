@@ -41,12 +41,14 @@ import numpy as np
 import torch
 
 from ..physics.cloth import Cloth, Rest
+from ..physics.fitting import Observed
 from ..physics.forces import TERMS
 from ..physics.material import Material
 from ..physics.simulator import ImplicitSimulator
 from ..physics.terms import StepInputs, Term
 from .blender_units import wind_push
 from .residuals import FrameBatch
+from .rest_field import fit_rest_field
 
 GRAVITY = 9.81              # m/s^2
 MIN_TERMINAL_SPEED = 0.3    # m/s: slower free fall in air is not cloth (module docstring)
@@ -177,6 +179,9 @@ class Candidate:
     needs_unloaded_rest: bool = False        # tried only against a given rest mesh (pipeline.usable_candidates)
     forms: tuple[Form, ...] = ()             # alternative models of the same coefficients
     horizontal: bool = False                 # the coefficients are (x, z) of one horizontal vector
+    # a per-vertex field of the candidate's log-scale fitted on training recordings (sim, recordings, seed; e.g.
+    # rest_field.fit_rest_field), whose region the scan tries beside its patches (scan.fitted_field)
+    field_fit: Callable[[ImplicitSimulator, list[Observed], int], np.ndarray] | None = None
 
     def form(self, label: str) -> Form | None:
         return next((f for f in self.forms if f.label == label), None)
@@ -423,6 +428,6 @@ CANDIDATES: tuple[Candidate, ...] = (
     _region_candidate("rest_length_region", "rest_length",
                       "rest lengths changed on a region (tight seam, elastic band): static tension along a curve",
                       ("rest",), ("rest_length_change",), (-0.5, 0.5), region_from="scan",
-                      needs_unloaded_rest=True),
+                      needs_unloaded_rest=True, field_fit=fit_rest_field),
 )
 BY_NAME: dict[str, Candidate] = {c.name: c for c in CANDIDATES}

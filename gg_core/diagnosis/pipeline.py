@@ -58,7 +58,7 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     t0 = time.perf_counter()
     ctx = Context.build(sim, r.batch, loc.region, r.predicted)
     scans = {c.name: scan_region(c, ctx, r.pooling, r.predicted, r.y, r.nuisance_cols, req.probe_acceleration,
-                                 train, attached, baseline_train_l2)
+                                 train, attached, baseline_train_l2, req.seed)
              for c in candidates if c.region_from == "scan"}
     contexts = {c.name: replace(ctx, region=scans[c.name].region) if c.name in scans else ctx for c in candidates}
     progress.step("region scan")
@@ -317,7 +317,8 @@ def _run_fold(job: _FoldJob, step: Step) -> Fold:
         ctx = Context.build(sim, r.batch, job.regions.get(n), r.predicted)
         if cand.region_from == "scan":
             ctx = replace(ctx, region=scan_region(cand, ctx, r.pooling, r.predicted, r.y, r.nuisance_cols,
-                                                  req.probe_acceleration, job.train, job.attached, train_l2).region)
+                                                  req.probe_acceleration, job.train, job.attached, train_l2,
+                                                  req.seed).region)
             if ctx.region is None:
                 step(f"trial {n} without {held}: no region scanned on this fold's recordings")
                 continue

@@ -261,7 +261,12 @@ def region_sentence(loc: dict) -> str:
     out = [f"Region candidates act on {len(region)} vertices, singled out because {why}." if region else
            "No garment region stood out in the maps: region candidates that use them were not tried."]
     for name, scan in loc.get("scanned_regions", {}).items():
-        if scan["region_vertices"]:
+        if scan["region_vertices"] and scan.get("source") == "field":
+            out.append(f"{name} fitted its change vertex by vertex on the training recordings and acts on the "
+                       f"{len(scan['region_vertices'])} vertices where it reached half its largest value, where one "
+                       f"change explains {100 * scan['explained']:.1f} % of the residual"
+                       f"{_field_rolled_out(scan['rollouts'])}.")
+        elif scan["region_vertices"]:
             out.append(f"{name} scanned the garment patch by patch and acts on {len(scan['region_vertices'])} "
                        f"vertices ({len(scan['patches'])} patches), where one change explains "
                        f"{100 * scan['explained']:.1f} % of the residual{_rolled_out(scan.get('rollouts'))}.")
@@ -278,6 +283,14 @@ def _rolled_out(rollouts: dict | None) -> str:
     return (f"; the training rollouts chose it, grown from the patches the residual proposed: a change of "
             f"x{rollouts['scale']:.2f} there takes their error from {rollouts['train_rollout_l2_before'] * 1e3:.1f} "
             f"to {rollouts['train_rollout_l2'] * 1e3:.1f} mm before any refit")
+
+
+def _field_rolled_out(rollouts: dict) -> str:
+    """How a fitted field's region rolled the training recordings out (it is taken only where it rolls them out
+    better than the baseline and the patches)."""
+    return (f"; a change of x{rollouts['scale']:.2f} there takes the training rollouts' error from "
+            f"{rollouts['train_rollout_l2_before'] * 1e3:.1f} to {rollouts['train_rollout_l2'] * 1e3:.1f} mm before "
+            f"any refit, better than the patches the residual proposed")
 
 
 def _baseline_paragraph(baseline: dict) -> str:

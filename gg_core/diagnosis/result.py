@@ -156,6 +156,9 @@ class Result:
                              "activity_z_range": [float(loc.activity_map.min()), float(loc.activity_map.max())],
                              "scanned_regions": {n: {"region_vertices": None if r.region is None
                                                      else np.flatnonzero(r.region).tolist(),
+                                                     "source": r.source,
+                                                     "field_train_rollout_l2": None if np.isnan(r.field_l2)
+                                                     else r.field_l2,
                                                      "patches": r.patches, "explained": r.explained,
                                                      "best_patch_explained": float(r.patch_explained.max()),
                                                      "one_frame_patches": r.one_frame_patches,

@@ -13,7 +13,10 @@ So the scan fits the candidate's field change on each pooling patch alone (the s
 re-adjustment as the selection), starts from the patch it explains best, and grows the region patch by
 neighbouring patch while one common change on the union explains at least GROWTH_SHARE more of the residual. A
 region that explains less than MIN_SHARE, or covers more than REGION_MAX_FRACTION of the garment, is no region.
-The scan proposes; held-out rollouts still decide (verdict.confirmed).
+The scan proposes; held-out rollouts still decide (verdict.confirmed). A candidate that fits its own field vertex
+by vertex (Candidate.field_fit: rest lengths, rest_field.py) has that field's region (field_region) tried on the
+training rollouts too, at its best strength (fitted_field), and it replaces the patches' region where it rolls the
+training recordings out better than it and than the baseline.
 
 Measured in the benchmark (noise 0, the pipeline's pooling): seed 1 found 19 vertices along the waist from the
 seam's top towards the back (4 on the seam; the seam pulls on the attached waistband there), and the trial gained
@@ -87,6 +90,7 @@ ROLLOUT_SEEDS = 4          # single patches, those explaining most alone, tried 
 ROLLOUT_GROWTH = 0.01      # relative drop of the training rollout error a neighbouring patch must bring to join
 STRENGTH_EVALUATIONS = 8   # rollouts of a golden-section search for a region's strength
 GROWTH_EVALUATIONS = 5     # and for a grown region's, between none and the strength before it grew
+FIELD_CORE = 0.5           # share of a fitted field's extreme a vertex's value must reach to be in its region
 
 
 @dataclass
@@ -99,6 +103,8 @@ class ScanResult:
     rollout_l2_before: float     # training rollout error of the baseline (m), NaN where nothing was rolled out
     rollout_l2: float            # of the baseline with the chosen region changed, at its best strength
     strength: float              # that change as a log-scale of the candidate's fields
+    source: str = "patches"      # "patches": grown patch by patch; "field": the candidate's fitted field (field_fit)
+    field_l2: float = float("nan")   # training rollout error of the fitted field's region at its best strength
 
 
 def patch_adjacency(patch: np.ndarray, edges: np.ndarray) -> list[set[int]]:
@@ -151,20 +157,40 @@ def grow(cand: Candidate, y: np.ndarray, nuisance: np.ndarray, columns: np.ndarr
     return chosen, share, alone
 
 
+def _rows(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.ndarray, region: np.ndarray,
+          acceleration: float, n_rows: int) -> np.ndarray:
+    """[n_rows,K] pooled one-frame response rows of `cand`'s change on `region` (zero where the change does nothing
+    there or its probe step failed to solve: it explains nothing)."""
+    probes = cand.probes(replace(ctx, region=region), acceleration)
+    if all(size > 0 for size, _ in probes):
+        rows = pooling.rows(responses(ctx.sim, ctx.batch, predicted, probes)).T
+        if np.isfinite(rows).all():
+            return rows
+    return np.zeros((n_rows, len(cand.coefficients)))
+
+
+def field_region(u: np.ndarray) -> np.ndarray | None:
+    """Region of a fitted per-vertex log-scale field `u`: 1.0 where it reaches FIELD_CORE of its extreme on the
+    extreme's side, else 0 (None where the field is flat). A region, not the graded field: the effects it stands
+    for (a shrunk seam, an elastic band) change a region uniformly, and the candidate's one strength then measures
+    that change (a graded region's strength would be its extreme's, which no vertex group of the garment has)."""
+    k = int(np.argmax(np.abs(u)))
+    if abs(u[k]) < 1e-6:
+        return None
+    return (u / u[k] >= FIELD_CORE).astype(np.float64)
+
+
 def scan_region(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.ndarray, y: np.ndarray,
                 nuisance: np.ndarray, acceleration: float, train: list[Observed], pinned: np.ndarray,
-                train_l2: float) -> ScanResult:
+                train_l2: float, seed: int) -> ScanResult:
     """The region of `cand` (a region candidate) from its response on each pooling patch, chosen on the rollouts
     of the training recordings `train` (rollout_region), which the unchanged simulator rolls out `train_l2` (m) off
     (the baseline fit measured it); `y` and `nuisance` are the pooled residual rows and nuisance columns of the
-    selection, `predicted` the unchanged one-frame prediction."""
-    columns_arr = np.zeros((pooling.n_patches, len(y), len(cand.coefficients)))
-    for p in range(pooling.n_patches):
-        probes = cand.probes(replace(ctx, region=(pooling.patch == p).astype(np.float64)), acceleration)
-        if all(size > 0 for size, _ in probes):     # else the change does nothing on this patch
-            rows = pooling.rows(responses(ctx.sim, ctx.batch, predicted, probes)).T
-            if np.isfinite(rows).all():             # a patch whose probe step failed to solve explains nothing
-                columns_arr[p] = rows
+    selection, `predicted` the unchanged one-frame prediction. A candidate that fits its own field
+    (Candidate.field_fit, sampled with `seed`) has that field's region tried on the same rollouts, and the
+    region that rolls them out better is taken."""
+    columns_arr = np.stack([_rows(cand, ctx, pooling, predicted, (pooling.patch == p).astype(np.float64),
+                                  acceleration, len(y)) for p in range(pooling.n_patches)])
     free = pooling.patch >= 0
     sizes = np.bincount(pooling.patch[free], minlength=pooling.n_patches)
     max_patches = max(1, int(REGION_MAX_FRACTION * free.sum() / max(sizes.mean(), 1.0)))
@@ -172,14 +198,58 @@ def scan_region(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.n
     groups = pooling.groups()
     base = nuisance_rss(y, nuisance, groups)
     chosen, share, alone = grow(cand, y, nuisance, columns_arr, groups, base, neighbours, max_patches, MIN_SHARE)
-    if not chosen:
-        return ScanResult(None, [], share, alone, [], float("nan"), float("nan"), 0.0)
-    seeds = [[int(p)] for p in np.argsort(-alone)[:ROLLOUT_SEEDS] if [int(p)] != chosen]
-    rolled = rollout_region(cand, ctx, pooling.patch, [chosen, *seeds], neighbours, max_patches, train, pinned,
-                            train_l2)
+    rolled = None
+    if chosen:
+        seeds = [[int(p)] for p in np.argsort(-alone)[:ROLLOUT_SEEDS] if [int(p)] != chosen]
+        rolled = rollout_region(cand, ctx, pooling.patch, [chosen, *seeds], neighbours, max_patches, train, pinned,
+                                train_l2)
+    fitted = None if cand.field_fit is None else fitted_field(cand, ctx, train, pinned, seed)
+    field_l2 = float("nan") if fitted is None else fitted.error
+    if fitted is not None and fitted.error < (train_l2 if rolled is None else min(train_l2, rolled.error)):
+        explained = _share(cand, y, nuisance, _rows(cand, ctx, pooling, predicted, fitted.region, acceleration,
+                                                     len(y)), groups, base)
+        return ScanResult(fitted.region, [], explained, alone, chosen, train_l2, fitted.error, fitted.strength,
+                          "field", field_l2)
+    if rolled is None:
+        return ScanResult(None, [], share, alone, [], float("nan"), float("nan"), 0.0, field_l2=field_l2)
     explained = _share(cand, y, nuisance, columns_arr[rolled.patches].sum(0), groups, base)
     return ScanResult(np.isin(pooling.patch, rolled.patches).astype(np.float64), rolled.patches, explained, alone,
-                      chosen, rolled.before, rolled.error, rolled.strength)
+                      chosen, rolled.before, rolled.error, rolled.strength, field_l2=field_l2)
+
+
+def region_error(cand: Candidate, ctx: Context, region: np.ndarray, strength: float, train: list[Observed],
+                 pinned: np.ndarray) -> float:
+    """Training rollout error (m) of the simulator with `cand`'s fields changed by the log-scale `strength` on
+    `region` (infinite where a rollout fails)."""
+    change = cand.model(np.full(len(cand.coefficients), np.expm1(strength)), replace(ctx, region=region))
+    with applied(ctx.sim, change, region) as sim:
+        return float(np.nan_to_num(mean_rollout_error(sim, train, pinned), nan=np.inf))
+
+
+@dataclass
+class FittedField:
+    """The region of a candidate's fitted field (field_region), at the strength that rolls the training
+    recordings out best."""
+
+    region: np.ndarray
+    strength: float
+    error: float
+
+
+def fitted_field(cand: Candidate, ctx: Context, train: list[Observed], pinned: np.ndarray,
+                 seed: int) -> FittedField | None:
+    """`cand`'s own field fitted on the `train` recordings (Candidate.field_fit) as a region, its strength searched
+    on their rollouts between none and twice the fitted extreme (the fit's teacher-forced loss looks a few frames
+    ahead; the rollouts, like rollout_region's, look at the whole motion); None where the fit left the field flat."""
+    u = cand.field_fit(ctx.sim, train, seed)
+    region = field_region(u)
+    if region is None:
+        return None
+    lo, hi = np.log1p(cand.bounds)
+    extreme = float(u[np.argmax(np.abs(u))])
+    strength, error = golden_section(lambda c: region_error(cand, ctx, region, float(np.clip(c * extreme, lo, hi)),
+                                                            train, pinned), 0.0, 2.0, STRENGTH_EVALUATIONS)
+    return FittedField(region, float(np.clip(strength * extreme, lo, hi)), error)
 
 
 @dataclass
@@ -204,10 +274,7 @@ def rollout_region(cand: Candidate, ctx: Context, patch: np.ndarray, starts: lis
     lo, hi = np.log1p(cand.bounds)
 
     def error(patches: list[int], strength: float) -> float:
-        region = np.isin(patch, patches).astype(np.float64)
-        change = cand.model(np.full(len(cand.coefficients), np.expm1(strength)), replace(ctx, region=region))
-        with applied(ctx.sim, change, region) as sim:
-            return float(np.nan_to_num(mean_rollout_error(sim, train, pinned), nan=np.inf))
+        return region_error(cand, ctx, np.isin(patch, patches).astype(np.float64), strength, train, pinned)
 
     searched = [RolledRegion(p, *golden_section(lambda s, p=p: error(p, s), lo, hi, STRENGTH_EVALUATIONS), before)
                 for p in starts]

@@ -11,7 +11,8 @@ it through the force library, refit, and show the held-out rollout error before 
    weak form, after re-adjusting the global parameters to it (gg_core/diagnosis/residuals.py).
 3. Localization: per-vertex map, per-frame curve, their best-correlated state features, the standout region
    (first from the deformation activity: where the cloth stretches less than the baseline's own rollouts say);
-   a rest-length region, which no map shows, is scanned for patch by patch (gg_core/diagnosis/scan.py).
+   a rest-length region, which no map shows, is scanned for patch by patch (gg_core/diagnosis/scan.py) and fitted
+   vertex by vertex (gg_core/diagnosis/rest_field.py); the training rollouts choose between them.
 4. Selection: forward sparse regression on the candidate library with a moving-block bootstrap (rest-length
    changes only with a rest mesh given: pipeline.usable_candidates).
 5. Confirmation: the selected candidates, then the others by the share of the residual they explain, up to

@@ -93,7 +93,7 @@ def test_a_fold_scans_its_own_training_recordings_for_a_scanned_region(monkeypat
         tried[cand.name] = ctx.region
         return Trial([cand.name], 0.004, 1.0, 0.003)
 
-    def fake_scan(cand, ctx, pooling, predicted, y, nuisance, acceleration, fit_on, attached, train_l2):
+    def fake_scan(cand, ctx, pooling, predicted, y, nuisance, acceleration, fit_on, attached, train_l2, seed):
         scanned.append((cand.name, pooling, [o.name for o in fit_on], ctx.region, train_l2))
         return SimpleNamespace(region=found)
 

@@ -105,6 +105,13 @@ def testregion_sentence_says_where_each_region_candidate_acted():
             "proposed: a change of x0.89 there takes their error from 12.2 to 9.4 mm before any refit.") in text
     rolled["train_rollout_l2"] = 0.0122          # no change rolled out better: the rollouts chose nothing
     assert "12.3 % of the residual. " in region_sentence({"scanned_regions": scanned})
+    field = {"region_vertices": [1, 2, 3], "source": "field", "patches": [], "explained": 0.2,
+             "best_patch_explained": 0.1, "rollouts": {**rolled, "train_rollout_l2": 0.008}}
+    assert ("rest_length_region fitted its change vertex by vertex on the training recordings and acts on the 3 "
+            "vertices where it reached half its largest value, where one change explains 20.0 % of the residual; a "
+            "change of x0.89 there takes the training rollouts' error from 12.2 to 8.0 mm before any refit, better "
+            "than the patches the residual proposed.") in region_sentence(
+        {"scanned_regions": {"rest_length_region": field}})
     assert "heavy_region scanned the garment patch by patch: no patch explains enough of the residual (best 1.0 %)" \
         in text
     assert region_sentence({}).startswith("No garment region stood out in the maps")
