@@ -43,6 +43,35 @@ def side_strip(v: np.ndarray) -> np.ndarray:
     return np.isclose(v[:, 0], v[:, 0].max()) | np.isclose(v[:, 0], np.sort(np.unique(v[:, 0]))[-2])
 
 
+def sheet_simulator(v: np.ndarray, f: np.ndarray, pinned: np.ndarray) -> ImplicitSimulator:
+    """The hanging sheet's simulator: MATERIAL, gravity, stretching and bending only."""
+    return ImplicitSimulator(Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **MATERIAL)),
+                             terms=make_terms(["gravity", "stretching", "bending"]))
+
+
+def swaying(sim: ImplicitSimulator, v: np.ndarray) -> list[Observed]:
+    """Two 14-frame recordings of `sim` from rest at `v`, its pinned corners swaying sideways (8 and 12 cm)."""
+    sequences = []
+    for k, amp in enumerate((0.08, 0.12)):
+        shift = np.zeros((14, 3))
+        shift[:, 0] = amp * np.sin(2 * np.pi * 1.2 * np.arange(14) / 30)
+        traj = sim.rollout(ClothState(v.copy(), np.zeros_like(v)), None, n_frames=14,
+                           pin_frames=v[None] + shift[:, None])
+        sequences.append(Observed(f"s{k}", traj, None, 30.0))
+    return sequences
+
+
+def shrunk_strip(scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Observed], ImplicitSimulator]:
+    """(vertices, pinned, side_strip, the swaying recordings of the hanging sheet with the strip's rest lengths
+    scaled by `scale`, the unchanged simulator): a seam-like hidden rest-length change."""
+    v, f, pinned = hanging_sheet()
+    strip = side_strip(v)
+    truth = sheet_simulator(v, f, pinned)
+    apply_region(truth.cloth, strip.astype(np.float64), {"rest": float(np.log(scale))})
+    truth.refresh()
+    return v, pinned, strip, swaying(truth, v), sheet_simulator(v, f, pinned)
+
+
 def write_sim_capture(root: Path, extra: dict[str, dict] | None = None, n_frames: int = 16,
                       region: tuple[np.ndarray, dict[str, float]] | None = None) -> Path:
     """Sequences a, b (train) and c (held out) of the sheet simulated with the default model (its air damping

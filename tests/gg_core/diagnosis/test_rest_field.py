@@ -7,10 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from diagnosis_helpers import hanging_sheet, side_strip
-from test_scan import _sheet_sim, _swaying
+from diagnosis_helpers import shrunk_strip, swaying
 
-from gg_core.diagnosis.library import apply_region
 from gg_core.diagnosis.rest_field import fit_rest_field, total_variation
 from gg_core.diagnosis.scan import field_region
 
@@ -28,19 +26,14 @@ def test_total_variation_gradient_is_its_derivative():
 
 
 def test_a_hidden_rest_length_change_on_a_strip_is_fitted_on_the_strip_and_nothing_hidden_leaves_it_flat():
-    v, f, pinned = hanging_sheet()
-    strip = side_strip(v)
-    truth = _sheet_sim(v, f, pinned)
-    apply_region(truth.cloth, strip.astype(np.float64), {"rest": float(np.log(0.95))})
-    truth.refresh()
-    model = _sheet_sim(v, f, pinned)
+    v, _, strip, recordings, model = shrunk_strip(0.95)
     rest = model.cloth.rest_lengths.clone()
-    u = fit_rest_field(model, _swaying(truth, v), 0)
+    u = fit_rest_field(model, recordings, 0)
     assert torch.equal(model.cloth.rest_lengths, rest)           # the simulator is left as it was
     assert u[strip] == pytest.approx(np.log(0.95), rel=0.15)     # the strip, at the hidden size
     assert np.abs(u[~strip]).max() < 0.1 * np.abs(np.log(0.95))  # and nowhere else
     assert (field_region(u) == strip).all()
-    assert field_region(fit_rest_field(model, _swaying(model, v), 0)) is None
+    assert field_region(fit_rest_field(model, swaying(model, v), 0)) is None
 
 
 def test_field_region_is_where_the_field_reaches_half_its_extreme_on_its_side():

@@ -9,16 +9,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from diagnosis_helpers import MATERIAL, hanging_sheet, side_strip
+from diagnosis_helpers import shrunk_strip, swaying
 
-from gg_core.diagnosis.library import BY_NAME, Context, apply_region
+from gg_core.diagnosis.library import BY_NAME, Context
 from gg_core.diagnosis.residuals import build_frames, make_pooling, residual
 from gg_core.diagnosis.scan import MIN_SHARE, grow, nuisance_rss, patch_adjacency, rollout_region, scan_region
-from gg_core.physics.cloth import Cloth
-from gg_core.physics.fitting import Observed, mean_rollout_error
-from gg_core.physics.forces import make_terms
-from gg_core.physics.material import Material
-from gg_core.physics.simulator import ClothState, ImplicitSimulator
+from gg_core.physics.fitting import mean_rollout_error
 
 REST = BY_NAME["rest_length_region"]
 
@@ -54,33 +50,8 @@ def test_grow_takes_the_neighbouring_patches_the_residual_came_from():
                 MIN_SHARE)[0] == []
 
 
-BASE_TERMS = ["gravity", "stretching", "bending"]
-
-
-def _swaying(sim: ImplicitSimulator, v: np.ndarray) -> list[Observed]:
-    sequences = []
-    for k, amp in enumerate((0.08, 0.12)):
-        shift = np.zeros((14, 3))
-        shift[:, 0] = amp * np.sin(2 * np.pi * 1.2 * np.arange(14) / 30)
-        traj = sim.rollout(ClothState(v.copy(), np.zeros_like(v)), None, n_frames=14,
-                           pin_frames=v[None] + shift[:, None])
-        sequences.append(Observed(f"s{k}", traj, None, 30.0))
-    return sequences
-
-
-def _sheet_sim(v: np.ndarray, f: np.ndarray, pinned: np.ndarray) -> ImplicitSimulator:
-    return ImplicitSimulator(Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **MATERIAL)),
-                             terms=make_terms(BASE_TERMS))
-
-
 def test_hidden_rest_length_change_on_a_strip_is_found_there():
-    v, f, pinned = hanging_sheet()
-    strip = side_strip(v)
-    truth = _sheet_sim(v, f, pinned)
-    apply_region(truth.cloth, strip.astype(np.float64), {"rest": float(np.log(0.95))})
-    truth.refresh()
-    sequences = _swaying(truth, v)
-    model = _sheet_sim(v, f, pinned)
+    v, pinned, strip, sequences, model = shrunk_strip(0.95)
     batch = build_frames(model, sequences)
     res = residual(model, batch)
     pooling = make_pooling(model, batch, patch_vertices=5, window=4)
@@ -113,7 +84,7 @@ def test_hidden_rest_length_change_on_a_strip_is_found_there():
     assert set(rolled.patches) == set(pooling.patch[on_strip])      # grown from the strip over all of it
     assert rolled.strength == pytest.approx(np.log(0.95), rel=0.2) and rolled.error < 0.3 * rolled.before
 
-    still = _swaying(model, v)                 # nothing hidden: no change rolls out better, the first start stands
+    still = swaying(model, v)                  # nothing hidden: no change rolls out better, the first start stands
     calm = mean_rollout_error(model, still, pinned)
     rolled = rollout_region(REST, ctx, pooling.patch, [[off[0]], [on]], neighbours, 4, still, pinned, calm)
     assert rolled.patches == [off[0]] and rolled.strength == 0.0 and rolled.error == rolled.before == calm
