@@ -205,7 +205,8 @@ def scan_region(cand: Candidate, ctx: Context, pooling: Pooling, predicted: np.n
                                 train_l2)
     fitted = None if cand.field_fit is None else fitted_field(cand, ctx, train, pinned, seed)
     field_l2 = float("nan") if fitted is None else fitted.error
-    if fitted is not None and fitted.error < (train_l2 if rolled is None else min(train_l2, rolled.error)):
+    # rollout_region's error is at most the baseline's (train_l2): where no start beats it, it reports that
+    if fitted is not None and fitted.error < (train_l2 if rolled is None else rolled.error):
         explained = _share(cand, y, nuisance, _rows(cand, ctx, pooling, predicted, fitted.region, acceleration,
                                                      len(y)), groups, base)
         return ScanResult(fitted.region, [], explained, alone, chosen, train_l2, fitted.error, fitted.strength,
