@@ -196,6 +196,16 @@ def hinge_energy(x, hinges, coef, rest_angle):
 
 
 @njit(cache=True)
+def hinge_angles(x, hinges):
+    """Dihedral angle of every hinge [H] (0 = flat)."""
+    out = np.empty(hinges.shape[0])
+    g = np.empty((4, 3))
+    for h in range(hinges.shape[0]):
+        out[h] = _hinge_geometry(x, hinges, h, g, False)
+    return out
+
+
+@njit(cache=True)
 def edge_assemble(x, edges, dphi, d2phi, grad, hdiag, hpair):
     """Energies phi(l) of edge lengths l = |x_i - x_j| (edge e is pair e): gradient and the PSD Hessian
     max(d2phi, 0) n n^T + max(dphi / l, 0) (I - n n^T)."""
