@@ -107,7 +107,8 @@ class System:
 
 class Term(ABC):
     """One named contribution to the incremental potential. Subclasses set `name`, `defaults` (parameter name ->
-    default value, floats or 3-vectors) and document the physical meaning in their docstring."""
+    default value, floats or 3-vectors) and document the physical meaning in their docstring. Scalar parameters
+    are magnitudes (a negative damping would feed energy in), so a term refuses negative or non-finite values."""
 
     name: ClassVar[str]
     defaults: ClassVar[dict[str, Any]] = {}
@@ -119,6 +120,11 @@ class Term(ABC):
             raise ValueError(f"term '{self.name}' has no parameters {sorted(unknown)}; it has {sorted(self.defaults)}")
         self.params: dict[str, torch.Tensor] = {
             k: torch.tensor(params.get(k, v), dtype=torch.float64) for k, v in self.defaults.items()}
+        for key, value in self.params.items():
+            if not bool(torch.isfinite(value).all()) or (value.ndim == 0 and float(value) < 0.0):
+                raise ValueError(f"term '{self.name}' parameter {key}={value.tolist()} is not physical: scalar "
+                                 f"parameters are magnitudes (coefficients, stiffnesses, times, margins) and must be "
+                                 f"finite and >= 0; vectors (directions, velocities) finite")
 
     @classmethod
     def meaning(cls) -> str:

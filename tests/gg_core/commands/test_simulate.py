@@ -61,6 +61,10 @@ def test_bad_input_is_one_error_line(tmp_path, capsys):
     assert main(["simulate", "--garment", str(tmp_path / "g.ply"), "--motion", "walk", "--out", str(tmp_path / "o"),
                  "--force", "lift:coef=1"]) == 2
     assert capsys.readouterr().err.startswith("gg: error: unknown force terms")
+    assert main(["simulate", "--garment", str(tmp_path / "g.ply"), "--motion", "walk", "--out", str(tmp_path / "o"),
+                 "--force", "bending_damping:tau=-0.1"]) == 2
+    assert capsys.readouterr().err.startswith("gg: error: term 'bending_damping' parameter tau=-0.1 is not physical")
+    assert not (tmp_path / "o").exists()
 
 
 def test_a_fitted_behaviour_brings_its_own_garment_mesh(tmp_path):

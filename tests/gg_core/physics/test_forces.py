@@ -31,6 +31,11 @@ def test_registry_contract():
         make_terms(["gravity"], {"wind": {"coef": 1.0}})
     with pytest.raises(ValueError, match="has no parameters"):
         make_terms(["air_drag"], {"air_drag": {"cd": 1.0}})
+    with pytest.raises(ValueError, match="bending_damping' parameter tau=-1.0 is not physical"):
+        make_terms(["bending_damping"], {"bending_damping": {"tau": -1.0}})
+    with pytest.raises(ValueError, match="not physical"):
+        make_terms(["wind"], {"wind": {"velocity": (float("nan"), 0.0, 0.0)}})
+    assert float(make_terms(["wind"], {"wind": {"velocity": (-2.0, 0.0, 0.0)}})[-1].params["velocity"][0]) == -2.0
 
 
 def _fall(extra: list[str], params: dict, seconds: float = 4.0) -> tuple[np.ndarray, float]:
