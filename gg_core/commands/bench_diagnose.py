@@ -151,6 +151,16 @@ def effect_sizes_of(args: argparse.Namespace, name: str, seed: int, effect: str,
                         capture_of(args, f"{none}_steps_x2", seed, quality_factor=2))
 
 
+def reference_divergence_of(args: argparse.Namespace, name: str, seed: int, effect: str, params: Sequence[str]
+                            ) -> dict[str, float]:
+    """metrics.motion.reference_divergence of the case capture `name` against its twin simulated with twice the
+    steps per frame: per recording, how far the reference's own numerics move the motion a rollout is scored on."""
+    from ..metrics.motion import reference_divergence
+
+    return reference_divergence(capture_of(args, name, seed, effect, params),
+                                capture_of(args, f"{name}_steps_x2", seed, effect, params, quality_factor=2))
+
+
 def effect_params(effect: str, strength: float) -> list[str]:
     return [f"{k}={ref + strength * (default - ref):g}" for k, (ref, default) in STRENGTH.get(effect, {}).items()]
 
@@ -266,6 +276,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     params = effect_params(effect, strength) if strength > 0 else []
     capture = capture_of(args, name, seed, hidden, params)
     signal, step_change = (0.0, 0.0) if hidden == "none" else effect_sizes_of(args, name, seed, hidden, params)
+    divergence = reference_divergence_of(args, name, seed, hidden, params)
     truth = json.loads((capture / "truth.json").read_text())
     true_class = SYNTH_EFFECT_CLASS[truth["effect"]["name"]]
     project = args.cache / "projects" / f"{name}_noise{noise:g}{'_rest' if args.rest_given else ''}"
@@ -331,6 +342,9 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
                                          else None, np.load(region_path) if region_path else None),
         "signal_mm": signal * 1e3, "step_change_mm": step_change * 1e3,
         "resolved_by_reference": bool(step_change < signal),
+        # the floor every simulator but the reference at its own step carries: compare with heldout_l2_after
+        "reference_divergence_mm": {k: v * 1e3 for k, v in divergence.items()},
+        "heldout_reference_divergence_mm": 1e3 * float(np.mean([divergence[k] for k in report["heldout_sequences"]])),
         "seconds": report["timings"]["total_s"],
     }
 
@@ -363,6 +377,7 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
                if c.get("cross_validated_true_effect_gain") is not None]
     closed_to_truth = [c["true_model_gap_closed"] for c in present if c.get("true_model_gap_closed") is not None]
     overruled = [c for c in cases if c["rollouts_first"]]
+    floored = [c for c in cases if c.get("heldout_reference_divergence_mm") is not None]   # older runs lack it
     identified = [all(c["truth_in_identified_range"].values()) for c in present if c.get("truth_in_identified_range")]
 
     def mean(xs: list[float]) -> float | None:
@@ -392,6 +407,9 @@ def summarize(cases: list[dict], min_gain: float) -> dict:
             "median_cross_validated_gap_closed": float(np.median(cv_closed)) if cv_closed else None,
             "mean_cross_validated_true_effect_gain": mean(cv_true),
             "median_true_model_gap_closed": float(np.median(closed_to_truth)) if closed_to_truth else None,
+            # the delivered model's held-out error next to the floor the reference's own step puts under it
+            "mean_heldout_l2_after_mm": mean([1e3 * c["heldout_l2_after"] for c in floored]),
+            "mean_heldout_reference_divergence_mm": mean([c["heldout_reference_divergence_mm"] for c in floored]),
             "residual_tie_breaks": len(overruled),
             "residual_tie_breaks_right": sum(c["correct"] for c in overruled)}
 
@@ -437,7 +455,9 @@ def run(args: argparse.Namespace) -> int:
                              + ", ".join(f"{k} {'yes' if v else 'NO'}"
                                          for k, v in case["truth_in_identified_range"].items()))
                           + f"; motion change {case['signal_mm']:.1f} mm, {case['step_change_mm']:.1f} mm "
-                            "of it moves at twice the steps", file=sys.stderr, flush=True)
+                            "of it moves at twice the steps; the reference itself moves "
+                            f"{case['heldout_reference_divergence_mm']:.1f} mm on the held-out recordings at twice "
+                            "the steps", file=sys.stderr, flush=True)
     for noise in args.noise_mm:
         subset = [c for c in cases if c["noise_mm"] == noise]
         print(f"\nnoise {noise:g} mm\n" + confusion(subset), file=sys.stderr)

@@ -48,6 +48,16 @@ def effect_field(effect: Path, reference: Path) -> list[np.ndarray]:
     return out
 
 
+def reference_divergence(capture: Path, finer: Path) -> dict[str, float]:
+    """Per sequence, in metres: the mean distance between the displacements of `capture` and of the same capture
+    simulated at a finer step (`finer`), over the frames a rollout is scored on (from the third) and the free
+    vertices. How far the reference solver's own numerics move its motion: a simulator that is not the reference
+    at its step starts about this far from the recordings, whatever physics it gets right."""
+    names = sorted(Capture(capture).sequences)
+    return {name: float(np.linalg.norm(field[2:], axis=-1).mean())
+            for name, field in zip(names, effect_field(capture, finer))}
+
+
 def effect_sizes(effect: Path, reference: Path, effect_finer: Path, reference_finer: Path) -> tuple[float, float]:
     """(signal, step change) in metres: the RMS of effect_field(effect, reference), and the RMS of how that field
     changes when both captures are simulated at a finer step (`effect_finer`, `reference_finer`)."""

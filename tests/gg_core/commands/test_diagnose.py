@@ -15,12 +15,13 @@ sys.path.insert(0, str(Path(__file__).parents[1] / "physics"))
 
 from diagnosis_helpers import write_blender_layout_capture, write_sim_capture  # noqa: E402
 
+from gg_core.capture.layout import Capture  # noqa: E402
 from gg_core.cli import main  # noqa: E402
 from gg_core.commands.bench_diagnose import (BLENDER_DEFAULT_STEPS, CLOTH_STEPS, capture_of,  # noqa: E402
                                              case_name, confusion, effect_params, fold_gains, identified_truth,
                                              parameter_error,
-                                             parameter_errors, region_overlap, summarize, true_model_l2,
-                                             truth_parameters)
+                                             parameter_errors, reference_divergence_of, region_overlap,
+                                             summarize, true_model_l2, truth_parameters)
 from gg_core.diagnosis.blender_units import WIND_COEF  # noqa: E402
 from gg_core.physics.forces import TERMS  # noqa: E402
 from gg_core.stages.diagnose import DiagnoseRequest  # noqa: E402
@@ -125,12 +126,14 @@ def test_bench_scoring():
     assert parameter_error(patch, refit) == pytest.approx(29.84 / 29)   # both scales must be right
     cases = [{"true_class": "none", "predicted": "none", "correct": True, "heldout_gain": 0.0, "gap_closed": None,
               "parameter_error": None, "heldout_l2_before": 0.01, "true_effect_l2": None,
-              "resolved_by_reference": False, "rollouts_first": None},
+              "resolved_by_reference": False, "rollouts_first": None, "heldout_l2_after": 0.01,
+              "heldout_reference_divergence_mm": 6.0},
              {"true_class": "gravity", "predicted": "gravity", "correct": True, "heldout_gain": 0.4,
               "cross_validated_gain": 0.3, "gap_closed": 0.9, "parameter_error": 0.1, "heldout_l2_before": 0.01,
               "true_effect_l2": 0.006, "cross_validated_true_effect_gain": 0.32,
               "cross_validated_gap_closed": 0.3 / 0.32, "parameter_error_all_recordings": 0.05,
-              "resolved_by_reference": True, "rollouts_first": "wind", "true_model_gap_closed": 0.7},
+              "resolved_by_reference": True, "rollouts_first": "wind", "true_model_gap_closed": 0.7,
+              "heldout_l2_after": 0.006, "heldout_reference_divergence_mm": 5.0},
              {"true_class": "wind", "predicted": "gravity", "correct": False, "heldout_gain": 0.1,
               "cross_validated_gain": 0.2, "gap_closed": 0.3, "parameter_error": None, "heldout_l2_before": 0.01,
               "true_effect_l2": 0.0095, "cross_validated_true_effect_gain": 0.04, "cross_validated_gap_closed": 5.0,
@@ -152,6 +155,9 @@ def test_bench_scoring():
     assert table[0].split()[-3:] == ["gravity", "none", "wind"]
     assert [int(v) for v in table[-1].split()[1:]] == [1, 0, 0]      # wind named gravity
     assert np.isfinite(summary["mean_heldout_gain_when_named"])
+    # the floor under the held-out errors, over the cases that measured it (the wind case is an older run's)
+    assert summary["mean_heldout_l2_after_mm"] == pytest.approx(8.0)
+    assert summary["mean_heldout_reference_divergence_mm"] == pytest.approx(5.5)
 
 
 def test_a_true_parameter_is_checked_against_the_range_the_recordings_leave_open():
@@ -223,6 +229,12 @@ def test_bench_captures_of_our_simulator_resimulate_the_blender_reference_of_the
     (capture / "truth.json").write_text(json.dumps(undamped))
     assert 0.0 < error < true_model_l2(request, report)
     assert true_model_l2(DiagnoseRequest(capture=reference, project=tmp_path / "q"), report) is None
+    # the floor under every rollout: the capture against its twin at twice the steps, per recording
+    divergence = reference_divergence_of(args, name, 3, "air_drag", effect_params("air_drag", 1.0))
+    twin = json.loads((tmp_path / f"{name}_steps_x2" / "truth.json").read_text())
+    assert twin["material"]["ours"]["substeps"] == 8
+    assert sorted(divergence) == sorted(Capture(capture).sequences)
+    assert all(0.0 < d < 0.05 for d in divergence.values())
 
 
 def test_bench_runs_sharing_a_cache_generate_each_capture_once(tmp_path, monkeypatch):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from gg_core.geometry.meshio import write_ply
-from gg_core.metrics.motion import displacements, effect_field, effect_sizes, rms
+from gg_core.metrics.motion import displacements, effect_field, effect_sizes, reference_divergence, rms
 
 
 def _motion(frames: int = 6, vertices: int = 5, seed: int = 0) -> np.ndarray:
@@ -65,3 +65,15 @@ def test_an_effect_is_sized_per_sequence_on_free_vertices_and_against_a_finer_st
     fewer = _capture(tmp_path / "fewer", {"00_walk": walk[:-1], "01_twist": twist}, [0])
     with pytest.raises(ValueError, match="00_walk"):
         effect_field(fewer, ref)
+
+
+def test_the_reference_divergence_is_the_mean_distance_over_the_scored_frames_per_sequence(tmp_path):
+    walk, twist = _motion(seed=1), _motion(seed=2)
+    coarse = _capture(tmp_path / "coarse", {"00_walk": walk, "01_twist": twist}, [0])
+    finer_walk = walk + _drift(len(walk), (0.0, 3e-3, 4e-3))       # 5 mm further every frame
+    finer_walk[:, 0] += 1.0                                           # the pinned vertex: ignored
+    finer = _capture(tmp_path / "finer", {"00_walk": finer_walk, "01_twist": twist + 0.2}, [0])
+    divergence = reference_divergence(coarse, finer)
+    # frames 2..5 are scored, as in a rollout started from frames 0 and 1: 10, 15, 20, 25 mm
+    assert divergence["00_walk"] == pytest.approx(17.5e-3, abs=1e-6)
+    assert divergence["01_twist"] == pytest.approx(0.0, abs=1e-6)   # the same motion from another start (float32 files)
