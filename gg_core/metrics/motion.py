@@ -4,7 +4,9 @@ The diagnosis benchmark asks two things of a hidden effect with it: how much it 
 capture against the same seed's capture with nothing hidden), and whether that change is physics or the
 reference solver's numerics (the same change when Blender takes twice the steps per frame). An effect whose
 change moves by as much as the change itself when the step is halved is not defined by the reference: no
-simulator that is not Blender at the same step size can be expected to reproduce it.
+simulator that is not Blender at the same step size can be expected to reproduce it. The same twin at twice the
+steps also measures the floor under every rollout error (reference_divergence): how far the reference's own motion
+moves with its step, effect or not.
 """
 from __future__ import annotations
 
