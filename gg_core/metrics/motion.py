@@ -33,20 +33,20 @@ def rms(fields: list[np.ndarray]) -> float:
     return float(np.sqrt(squares.mean()))
 
 
-def effect_field(effect: Path, reference: Path) -> list[np.ndarray]:
-    """Per sequence, [T,F,3] how the displacements of the synthetic capture `effect` differ from those of
+def effect_field(effect: Path, reference: Path) -> dict[str, np.ndarray]:
+    """Per sequence name, [T,F,3] how the displacements of the synthetic capture `effect` differ from those of
     `reference` (same garment and motions), on the vertices neither pins (truth.json)."""
     cap_e, cap_r = Capture(effect), Capture(reference)
     if sorted(cap_e.sequences) != sorted(cap_r.sequences):
         raise ValueError(f"captures hold different sequences: {sorted(cap_e.sequences)} vs {sorted(cap_r.sequences)}")
     pinned = {i for c in (cap_e, cap_r) for i in c.truth["garment"]["pinned_vertices"]}
-    out = []
+    out = {}
     for name in sorted(cap_e.sequences):
         e, r = gt_frames(cap_e.sequence(name)), gt_frames(cap_r.sequence(name))
         if e.shape != r.shape:
             raise ValueError(f"sequence '{name}' differs in shape: {e.shape} vs {r.shape}")
         free = np.array([i not in pinned for i in range(e.shape[1])])
-        out.append(displacements(e, free) - displacements(r, free))
+        out[name] = displacements(e, free) - displacements(r, free)
     return out
 
 
@@ -55,13 +55,12 @@ def reference_divergence(capture: Path, finer: Path) -> dict[str, float]:
     simulated at a finer step (`finer`), over the frames a rollout is scored on (from the third) and the free
     vertices. How far the reference solver's own numerics move its motion: a simulator that is not the reference
     at its step starts about this far from the recordings, whatever physics it gets right."""
-    names = sorted(Capture(capture).sequences)
     return {name: float(np.linalg.norm(field[2:], axis=-1).mean())
-            for name, field in zip(names, effect_field(capture, finer))}
+            for name, field in effect_field(capture, finer).items()}
 
 
 def effect_sizes(effect: Path, reference: Path, effect_finer: Path, reference_finer: Path) -> tuple[float, float]:
     """(signal, step change) in metres: the RMS of effect_field(effect, reference), and the RMS of how that field
     changes when both captures are simulated at a finer step (`effect_finer`, `reference_finer`)."""
     coarse, fine = effect_field(effect, reference), effect_field(effect_finer, reference_finer)
-    return rms(coarse), rms([c - f for c, f in zip(coarse, fine)])
+    return rms(list(coarse.values())), rms([coarse[name] - fine[name] for name in coarse])

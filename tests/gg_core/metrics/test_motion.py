@@ -55,7 +55,8 @@ def test_an_effect_is_sized_per_sequence_on_free_vertices_and_against_a_finer_st
     ref_f = _capture(tmp_path / "ref_f", {"00_walk": walk_f, "01_twist": twist_f}, [0])
     eff_f = _capture(tmp_path / "eff_f", {"00_walk": walk_f, "01_twist": twist_f + 0.5 * drift}, [0])
     field = effect_field(eff, ref)
-    assert len(field) == 2 and rms([field[0]]) == 0.0 and field[1].shape == (len(walk), 4, 3)
+    assert sorted(field) == ["00_walk", "01_twist"]
+    assert rms([field["00_walk"]]) == 0.0 and field["01_twist"].shape == (len(walk), 4, 3)
     signal, step_change = effect_sizes(eff, ref, eff_f, ref_f)
     assert signal == pytest.approx(rms([np.zeros((6, 4, 3)), np.repeat(drift, 4, axis=1)]))
     assert step_change == pytest.approx(signal / 2)
