@@ -1,7 +1,7 @@
 """Validation of a capture folder: every problem found, each as one InputError line (what, where, fix).
 
-`gg inspect` prints these; stages call `require_valid` before they start so bad input fails fast with exit 2
-instead of deep inside an optimization.
+`gg inspect` prints these and the importers check what they wrote with them; the stages raise the same
+InputErrors (exit 2) from the capture layout where they read a file, and `gg inspect` finds every one up front.
 """
 from __future__ import annotations
 
@@ -67,14 +67,6 @@ def validate_capture(root: str | Path, decode_images: bool = True,
         if on_sequence is not None:
             on_sequence(seq.name)
     return Report(capture.root, summaries, problems, truth)
-
-
-def require_valid(root: str | Path, decode_images: bool = False) -> Capture:
-    """Raise the first problem of a capture as InputError (exit 2); return the Capture when clean."""
-    report = validate_capture(root, decode_images)
-    if report.problems:
-        raise report.problems[0]
-    return Capture(Path(root))
 
 
 def _listed(names: list[str] | set[str]) -> str:

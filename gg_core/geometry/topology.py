@@ -74,15 +74,6 @@ def vertex_faces(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.nda
     return offsets, order // 3
 
 
-def vertex_neighbors(edges: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
-    """CSR (offsets [V+1], neighbour ids) of the one-ring of each vertex."""
-    both = np.concatenate([edges, edges[:, ::-1]])
-    order = np.argsort(both[:, 0], kind="stable")
-    offsets = np.zeros(n_vertices + 1, np.int64)
-    np.cumsum(np.bincount(both[:, 0], minlength=n_vertices), out=offsets[1:])
-    return offsets, both[order, 1]
-
-
 def face_areas(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     tri = verts[faces]
     return 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
