@@ -164,7 +164,7 @@ class StrainRateDamping(Term):
 
     def assemble(self, x, step, num, system):
         L = num.rest_lengths
-        rate = (self._lengths(x, num.edges) - self._lengths(step.x_prev, num.edges)) / (L * step.dt)
+        rate = (kernels.edge_lengths(x, num.edges) - kernels.edge_lengths(step.x_prev, num.edges)) / (L * step.dt)
         beta = self._beta_numeric(num)
         if system is not None:
             system.add_edge(x, beta * rate, beta / (L * step.dt) * np.ones_like(L))

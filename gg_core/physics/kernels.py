@@ -206,6 +206,18 @@ def hinge_angles(x, hinges):
 
 
 @njit(cache=True)
+def edge_lengths(x, edges):
+    """|x_i - x_j| of every edge [E]; the same bits as numpy's row norm, without its temporaries (the strain-rate
+    damping evaluates it twice per energy, a tenth of a rollout's time in numpy at 600 vertices)."""
+    out = np.empty(edges.shape[0])
+    for e in range(edges.shape[0]):
+        i, j = edges[e, 0], edges[e, 1]
+        a, b, c = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+        out[e] = np.sqrt(a * a + b * b + c * c)
+    return out
+
+
+@njit(cache=True)
 def edge_assemble(x, edges, dphi, d2phi, grad, hdiag, hpair):
     """Energies phi(l) of edge lengths l = |x_i - x_j| (edge e is pair e): gradient and the PSD Hessian
     max(d2phi, 0) n n^T + max(dphi / l, 0) (I - n n^T)."""

