@@ -15,6 +15,9 @@ GG_TO_BLENDER = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 # OpenCV camera axes (x right, y down, z forward) -> Blender camera axes (x right, y up, z backward)
 CV_TO_BLENDER_CAMERA = np.diag([1.0, -1.0, -1.0])
 SENSOR_WIDTH_MM = 36.0
+# Blender's cloth solver accelerates by the scene's gravity x 0.001 per frame^2, not per s^2
+# (tests/gg_core/diagnosis/test_blender_units.py measures it: 8.83 m/s^2 for 9.81 at 30 fps)
+CLOTH_GRAVITY_PER_FRAME2 = 0.001
 
 
 def to_blender(points: np.ndarray) -> np.ndarray:
@@ -25,6 +28,15 @@ def to_blender(points: np.ndarray) -> np.ndarray:
 def from_blender(points: np.ndarray) -> np.ndarray:
     """Points [..., 3] from Blender world to gg world."""
     return np.asarray(points) @ GG_TO_BLENDER
+
+
+def scene_gravity(gravity: list[float], fps: int) -> list[float]:
+    """Blender's scene gravity setting under which the cloth falls at `gravity` (gg coordinates, m/s^2).
+
+    Set uncompensated, every capture would fall at 0.001 fps^2 of the intended gravity (0.9 g at 30 fps) while its
+    truth.json said 9.81.
+    """
+    return (to_blender(np.asarray(gravity, np.float64)) / (CLOTH_GRAVITY_PER_FRAME2 * fps ** 2)).tolist()
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,7 @@ def build_scene(job: SequenceJob, arrays: dict[str, np.ndarray], workdir: Path) 
     scene.render.fps = job.fps
     scene.frame_start, scene.frame_end = 1, job.n_sim_frames
     scene.use_gravity = True
-    scene.gravity = tuple(to_blender(np.asarray(job.gravity)))
+    scene.gravity = tuple(job.scene_gravity)
     workdir.mkdir(parents=True, exist_ok=True)
 
     body_pc2 = workdir / "body.pc2"

@@ -28,6 +28,7 @@ from ..geometry.meshio import write_obj
 from ..jobs import Progress
 from ..storage import write_json, write_npz, write_report
 from .anchoring import bind
+from .blender_frame import scene_gravity
 from .effects import ResolvedEffect, region_names, resolve_effect
 from .fabrics import FABRICS, Look, random_look
 from .garments import Garment, tailor
@@ -109,7 +110,8 @@ def generate(req: SynthRequest) -> Path:
             sequence=name, seq_dir=str(seq_dir.resolve()), arrays=str((work / "arrays.npz").resolve()),
             arrays_digest=_digest(arrays), settle_frames=preset.settle_frames, frame_names=frame_names,
             fps=preset.fps, cloth=physics.cloth, cloth_collision=physics.collision,
-            body_collision=physics.body_collision, gravity=physics.gravity,
+            body_collision=physics.body_collision,
+            scene_gravity=scene_gravity(physics.gravity, preset.fps),
             force_fields=effect.blender.get("force_fields", []),
             cloth_vertex_groups=effect.blender.get("vertex_groups", {}),
             cameras={cid: c.to_json() for cid, c in cameras.items()}, lights=studio, look=look.to_json(),
@@ -271,7 +273,9 @@ def _truth(req: SynthRequest, preset: Preset, garment: Garment, physics: _Physic
                     "look": look.to_json(), "uv_scale_m": garment.uv_scale},
         "material": {"fabric": garment.fabric, "blender_cloth": physics.cloth,
                      "blender_cloth_collision": physics.collision, "blender_body_collision": physics.body_collision,
-                     "gravity": physics.gravity, "collider": "body mesh without the hands"},
+                     "gravity": physics.gravity,
+                     "blender_scene_gravity": scene_gravity(physics.gravity, preset.fps),
+                     "collider": "body mesh without the hands"},
         "effect": physics.effect.to_json(),
         "sequences": {n: {"motion": m, "motion_seed": req.seed + k, "frames": preset.n_frames,
                           "settle_frames": preset.settle_frames, "fps": preset.fps}

@@ -26,7 +26,7 @@ class SequenceJob:
     cloth: dict                       # Blender ClothSettings attributes (effect included)
     cloth_collision: dict             # ClothCollisionSettings attributes
     body_collision: dict              # CollisionSettings of the body collider
-    gravity: list[float]              # gg coordinates, m/s^2
+    scene_gravity: list[float]        # Blender's scene setting (Blender coordinates): blender_frame.scene_gravity
     force_fields: list[dict] = field(default_factory=list)
     cloth_vertex_groups: dict[str, str] = field(default_factory=dict)   # ClothSettings attribute -> region
     cameras: dict = field(default_factory=dict)     # cameras.json content: part of the resume key

@@ -6,6 +6,7 @@ import pytest
 
 from gg_core.capture.layout import Capture
 from gg_core.cli import main
+from gg_core.synth.blender_frame import from_blender, scene_gravity
 from gg_core.synth.quality import gt_frames
 
 from .conftest import generate_tiny
@@ -36,6 +37,21 @@ def test_same_seed_same_truth_and_resume_skips_finished_work(tiny_capture, tmp_p
     assert walk["resumed_simulation"] and walk["rendered_views"] == 1
     assert report["timings"]["sequences"]["01_arm_swing"]["rendered_views"] == 0
     assert removed.is_file()
+
+
+@pytest.mark.slow
+@pytest.mark.bpy
+def test_blender_is_given_the_gravity_setting_under_which_the_cloth_falls_at_the_truths(tiny_capture):
+    truth = json.loads((tiny_capture / "truth.json").read_text())
+    fps = truth["preset"]["fps"]
+    setting = truth["material"]["blender_scene_gravity"]
+    np.testing.assert_allclose(setting, scene_gravity(truth["material"]["gravity"], fps))
+    # Blender's cloth falls at 0.001 fps^2 of the setting (measured in tests/gg_core/diagnosis/test_blender_units.py)
+    np.testing.assert_allclose(from_blender(np.array(setting)) * 0.001 * fps ** 2, truth["material"]["gravity"])
+    jobs = sorted((tiny_capture / ".synth").glob("*/job.json"))
+    assert jobs
+    for job in jobs:
+        assert json.loads(job.read_text())["scene_gravity"] == setting
 
 
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
