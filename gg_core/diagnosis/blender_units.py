@@ -29,7 +29,9 @@ def truth_parameters(truth: dict) -> dict[str, float | list[float]]:
     9.81 m/s^2 (a vertical change is the material's free scale: baseline.BASELINE_FIT), so its horizontal offset
     is a tilt of that gravity. Measured on the four gravity captures of session 22 (hidden gravity 1.25 x 9.81
     tilted 12 deg: horizontal 2.55 m/s^2): refitted offsets 1.97-2.28 m/s^2, tilts 11.3-13.1 deg (9.81 tan 12 deg
-    = 2.09 m/s^2), so the offset in m/s^2 was off by 11-23 % and the tilt by 3-10 %."""
+    = 2.09 m/s^2), so the offset in m/s^2 was off by 11-23 % and the tilt by 3-10 %. Those captures fell at 0.9 g
+    (Blender's cloth applies 0.001 fps^2 of the scene's gravity, which `gg synth` compensates since session 67:
+    synth.blender_frame.scene_gravity): their horizontal gravity was 2.29 m/s^2, the offsets 0-14 % under it."""
     effect, params = truth["effect"]["name"], truth["effect"]["params"]
     ours = truth["effect"].get("ours", {}).get("terms", {})
     if effect == "air_drag":
