@@ -57,6 +57,7 @@ class GG_PT_stages(_Sidebar, Panel):
             row.enabled = ready
             row.operator(run, icon=icon)
             row.operator(load, text="", icon="FILE_REFRESH")
+        layout.prop(settings, "diagnose_vertex_mass")
         if settings.behavior:
             layout.label(text=settings.behavior, icon="INFO")
         if settings.diagnosis:

@@ -21,6 +21,11 @@ class GG_SceneSettings(PropertyGroup):
                                  description="Capture folder (one sub-folder per sequence with cameras.json)")
     project_path: StringProperty(name="Project", subtype="DIR_PATH",
                                  description="Project folder where the stages write their results")
+    diagnose_vertex_mass: EnumProperty(
+        name="Mass", default="area", description="How Diagnose Physics spreads the garment's mass (--vertex-mass)",
+        items=[("area", "By Area", "each vertex carries its share of the surface: a real fabric"),
+               ("uniform", "Per Vertex", "every vertex weighs the same, as Blender's cloth does: for captures "
+                                         "Blender simulated")])
     behavior: StringProperty(name="Behaviour", description="Held-out rollout error of the last loaded behaviour fit")
     diagnosis: StringProperty(name="Diagnosis", description="Verdict of the last loaded physics diagnosis")
     simulation_model: EnumProperty(name="Model", items=SIMULATION_MODEL_ITEMS, default="diagnosed",

@@ -66,6 +66,11 @@ class GG_OT_fit_behavior(_StageJob):
     stage, then = "behavior", "show_behavior"
 
 
+def diagnose_arguments(context: Context) -> list[str]:
+    """`gg diagnose` arguments: the folders and the panel's mass spread."""
+    return [*stage_arguments(context), "--vertex-mass", context.scene.gg.diagnose_vertex_mass]
+
+
 class GG_OT_diagnose_physics(_StageJob):
     """Find where and when simulation and recording differ, name the missing physics, refit, and colour the
     garment by the residual"""
@@ -73,6 +78,9 @@ class GG_OT_diagnose_physics(_StageJob):
     bl_idname = "gg.diagnose_physics"
     bl_label = "Diagnose Physics"
     stage, then = "diagnose", "show_residuals"
+
+    def arguments(self, context: Context) -> list[str]:
+        return diagnose_arguments(context)
 
 
 # properties.SIMULATION_MODEL_ITEMS key -> (model file in the project, how to make it)

@@ -87,6 +87,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rest-given", action="store_true",
                         help="give each diagnosis the garment's unloaded template as its rest mesh (gg diagnose "
                              "--rest-mesh), as a user with the sewing pattern could; default: the first frame")
+    parser.add_argument("--vertex-mass", choices=("area", "uniform"), default="area",
+                        help="gg diagnose --vertex-mass: uniform gives the diagnosis Blender's convention (every "
+                             "vertex the same mass), which a user knowing the data came from Blender's cloth could; "
+                             "projects then end in _um")
     parser.add_argument("--cloth-steps", type=int, default=CLOTH_STEPS,
                         help="Blender's cloth steps per frame (Quality Steps) of the captures; the step change is "
                              "measured against twice as many. Captures at other than Blender's own default (5) are "
@@ -279,7 +283,8 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     divergence = reference_divergence_of(args, name, seed, hidden, params)
     truth = json.loads((capture / "truth.json").read_text())
     true_class = SYNTH_EFFECT_CLASS[truth["effect"]["name"]]
-    project = args.cache / "projects" / f"{name}_noise{noise:g}{'_rest' if args.rest_given else ''}"
+    suffix = ("_rest" if args.rest_given else "") + ("_um" if args.vertex_mass == "uniform" else "")
+    project = args.cache / "projects" / f"{name}_noise{noise:g}{suffix}"
     reference, region_path = [], ""
     if true_class != "none":
         reference = [CLASS_CANDIDATE[true_class]]
@@ -292,6 +297,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     request = DiagnoseRequest(capture=capture, project=project, noise_mm=noise, seed=seed, bootstrap=args.bootstrap,
                               fit_horizon=args.fit_horizon, reference=reference, reference_region=region_path,
                               rest_mesh=str(capture / "gt" / "template.obj") if args.rest_given else "",
+                              vertex_mass=args.vertex_mass,
                               progress="none")
     report = json.loads(run_diagnose(request).read_text())
     true_model = true_model_l2(request, report)
@@ -312,6 +318,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     return {
         "capture": name, "effect": effect, "strength": strength, "seed": seed, "noise_mm": noise,
         "truth_simulator": args.truth_simulator, "rest_given": args.rest_given,
+        "vertex_mass": args.vertex_mass,
         "true_class": true_class, "predicted": predicted, "accepted": report["accepted"],
         "correct": predicted == true_class,
         "proposed": report["selection"]["order"],

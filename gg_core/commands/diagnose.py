@@ -31,6 +31,10 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rest-mesh", type=Path, default=None,
                         help="the garment unloaded (e.g. from its sewing pattern), in the observed meshes' topology; "
                              "default: the first training frame, a loaded state the fits then compensate for")
+    parser.add_argument("--vertex-mass", choices=("area", "uniform"), default="area",
+                        help="how the garment's mass is spread: area = by each vertex's share of the surface (a real "
+                             "fabric); uniform = the same on every vertex, as Blender's cloth does (for captures "
+                             "Blender simulated)")
     parser.add_argument("--baseline-iterations", type=int, default=15,
                         help="L-BFGS iterations of the global baseline fit")
     parser.add_argument("--refit-iterations", type=int, default=8,
@@ -61,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     req = DiagnoseRequest(capture=args.capture, project=args.project, source=args.source, train=args.train,
                           heldout=args.heldout, noise_mm=args.noise_mm, noise_length_mm=args.noise_length_mm,
                           denoise=args.denoise, attach_tol_mm=args.attach_tol_mm, sim_vertices=args.sim_vertices,
-                          rest_mesh=str(args.rest_mesh or ""),
+                          rest_mesh=str(args.rest_mesh or ""), vertex_mass=args.vertex_mass,
                           fps=args.fps, substeps=args.substeps, seed=args.seed,
                           baseline_iterations=args.baseline_iterations, refit_iterations=args.refit_iterations,
                           max_samples=args.max_samples, fit_horizon=args.fit_horizon, min_gain=args.min_gain,

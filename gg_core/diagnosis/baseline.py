@@ -104,7 +104,8 @@ def fit_baseline(req: DiagnoseRequest, train: list[Observed], faces: np.ndarray,
     collider = BodyCollider(body_faces, train[0].body.shape[1], exclude=hands)
     best, starts = None, {}
     for scale in MARGIN_STARTS:
-        cloth = Cloth(rest, faces, pinned=attached, flat=not req.rest_mesh)   # stages.diagnose.rest_state
+        cloth = Cloth(rest, faces, pinned=attached, flat=not req.rest_mesh,   # stages.diagnose.rest_state
+                      uniform_mass=req.vertex_mass == "uniform")
         terms = make_terms(BASELINE_TERMS, {
             "collision": {"margin": scale * TERMS["collision"].defaults["margin"]},
             "viscoelastic_damping": {"tau": INITIAL_LOSS_FACTOR / (2.0 * np.pi)}})

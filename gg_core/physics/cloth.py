@@ -80,6 +80,11 @@ class Cloth:
 
     rest_angles: dihedral rest angles per hinge; by default the template's own (so a curved template keeps its
     shape when unloaded, like Blender's angular bending); pass flat=True to bend towards flat (HOOD's choice).
+
+    uniform_mass: every vertex carries the same share of the mass (density x the mean vertex area), as Blender's
+    cloth gives each vertex its `mass` setting, instead of density x its own lumped area (a real fabric). On the
+    benchmark skirt the two differ 4x at the hem ring; refitting air damping s5 (true alpha 10 /s) on every
+    recording with each: alpha 11.3 /s (area) against 10.5 /s (uniform), free rollouts 5.92 against 5.51 mm.
     """
 
     template: np.ndarray                 # [V,3] float64, metres, +Y up
@@ -89,6 +94,7 @@ class Cloth:
     pinned: np.ndarray | None = None     # [V] bool
     flat: bool = False
     thickness: float = THICKNESS
+    uniform_mass: bool = False
     topology: Topology = field(init=False)
 
     def __post_init__(self) -> None:
@@ -170,6 +176,7 @@ class Cloth:
         c = vol[:, None, None] * (mu_f[:, None, None] * trbb
                                   + 0.5 * lam_f[:, None, None] * tr[:, :, None] * tr[:, None, :])
         vertex_area = torch.from_numpy(vertex_areas(self.template, topo.faces))
+        mass_area = vertex_area.mean().expand_as(vertex_area) if self.uniform_mass else vertex_area
         hinge_faces = torch.from_numpy(topo.hinge_faces)
         hinges = torch.from_numpy(topo.hinges)
         bend = mat.bending[hinges[:, :2]].mean(-1)
@@ -180,7 +187,7 @@ class Cloth:
                     rest_lengths=self.rest_lengths,
                     template=torch.from_numpy(self.template), thickness=self.thickness,
                     face_rest_sq=L ** 2, face_area=area, strain_basis=basis, stretch_c=c,
-                    mass=mat.density * vertex_area, vertex_area=vertex_area, hinge_coef=coef, rest_angle=rest_angle)
+                    mass=mat.density * mass_area, vertex_area=vertex_area, hinge_coef=coef, rest_angle=rest_angle)
 
     def numeric(self) -> Numeric:
         with torch.no_grad():

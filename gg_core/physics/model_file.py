@@ -3,8 +3,9 @@
 Written by the behaviour stage (stage4/behavior.npz) and by the diagnosis (diagnose/model.npz: the accepted missing
 physics included). Arrays: template [V,3] (rest positions), faces [F,3], attached [V] (pinned to the body),
 rest_lengths [E], one [V] array per material field (MATERIAL_NAMES), flat (bending towards flat instead of the
-template's angles) and terms (JSON: the force-library terms with their fitted parameters). Files from before flat and
-terms were stored load with the template's angles and no terms (the reader's default terms then apply).
+template's angles), uniform_mass (Cloth.uniform_mass) and terms (JSON: the force-library terms with their fitted
+parameters). Files from before flat, uniform_mass and terms were stored load with the template's angles, mass by
+area and no terms (the reader's default terms then apply).
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from .terms import Term
 
 @dataclass
 class FittedModel:
-    cloth: Cloth                                  # template, faces, material, rest lengths, pins, flat
+    cloth: Cloth                                  # template, faces, material, rest lengths, pins, flat, mass
     terms: list[tuple[str, dict[str, Any]]] | None   # (name, parameters) in order; None: not stored
 
 
@@ -32,6 +33,7 @@ def model_arrays(cloth: Cloth, terms: list[Term], attached: np.ndarray) -> dict[
     stored = [{"name": t.name, "params": {k: v.detach().tolist() for k, v in t.params.items()}} for t in terms]
     return {"template": cloth.template, "faces": cloth.faces, "attached": np.asarray(attached, bool),
             "rest_lengths": cloth.rest_lengths.detach().numpy(), "flat": np.array(cloth.flat),
+            "uniform_mass": np.array(cloth.uniform_mass),
             "terms": np.array(json.dumps(stored)),
             **{n: getattr(cloth.material, n).detach().numpy() for n in MATERIAL_NAMES}}
 
@@ -44,6 +46,7 @@ def read_model(path: str | os.PathLike) -> FittedModel:
     if missing:
         raise ValueError(f"no {', '.join(missing)} stored")
     cloth = Cloth(arrays["template"], arrays["faces"], flat=bool(arrays.get("flat", False)),
+                  uniform_mass=bool(arrays.get("uniform_mass", False)),
                   pinned=arrays["attached"].astype(bool) if "attached" in arrays else None)
     n = cloth.n_vertices
     bad = [k for k in MATERIAL_NAMES if arrays[k].shape != (n,)]

@@ -62,6 +62,7 @@ if TYPE_CHECKING:
 
 STAGE = "diagnose"
 DENOISE = ("auto", "on", "off")
+VERTEX_MASS = ("area", "uniform")
 DENOISE_ABOVE_MM = 0.5    # noise-free benchmark sequences estimate at 0.03-0.2 mm (contacts), noisy ones at sigma
 
 
@@ -97,6 +98,8 @@ class DiagnoseRequest:
     reference_region: str = ""         # .npy of [V] weights for region candidates in reference trials
     rest_mesh: str = ""                # the garment unloaded (same vertices as the observed meshes); default: the
                                        # first training frame, a loaded state (rest_state says what that costs)
+    vertex_mass: str = "area"          # area: density x each vertex's lumped area (a real fabric); uniform: every
+                                       # vertex the same mass, as Blender's cloth has it (physics.cloth.Cloth)
     workers: int | None = None         # confirming refits run at once, one process each (None: one per core)
     progress: str = "bar"
 
@@ -231,6 +234,9 @@ def prepare(req: DiagnoseRequest, capture: Capture, train_names: list[str], held
 def run_diagnose(req: DiagnoseRequest) -> Path:
     if req.denoise not in DENOISE:
         raise InputError(f"unknown denoise mode '{req.denoise}'", "--denoise", f"choose one of: {', '.join(DENOISE)}")
+    if req.vertex_mass not in VERTEX_MASS:
+        raise InputError(f"unknown vertex mass '{req.vertex_mass}'", "--vertex-mass",
+                         f"choose one of: {', '.join(VERTEX_MASS)}")
     check_workers(req.workers)
     start = time.perf_counter()
     capture = Capture(req.capture)
@@ -281,7 +287,7 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
         "noise_mm": req.noise_mm, "denoising": denoised.to_json(), "vertices": len(train[0].garment[0]),
         "simulation_mesh": mesh_log, "attached_vertices": int(inputs.attached.sum()),
         "rest_state": req.rest_mesh or f"first frame of {train_names[0]}, bending towards flat",
-        "rest_mesh_given": bool(req.rest_mesh),
+        "rest_mesh_given": bool(req.rest_mesh), "vertex_mass": req.vertex_mass,
         "outputs": {"residual_vertex": str(out / "residual_vertex.npy"),
                     "residual_vertex_unit": "m/s^2 (one-frame position error over the frame time squared)",
                     "activity_vertex": str(out / "activity_vertex.npy"),

@@ -90,6 +90,7 @@ def test_pipeline_panel_offers_each_stage_and_its_loader(blender, extension_pack
     assert ops == ["gg.reconstruct_template", "gg.load_template", "gg.register_sequences", "gg.load_registration",
                    "gg.fit_behavior", "gg.show_behavior", "gg.diagnose_physics", "gg.show_residuals"]
     assert not any(entry[0] == "label" for entry in log)
+    assert [e[1] for e in log if e[0] == "prop"] == ["diagnose_vertex_mass"]
     blender.context.scene.gg.behavior = "Behaviour (registered motion): held-out rollout 31.2 -> 12.5 mm"
     blender.context.scene.gg.diagnosis = "Missing physics: air_drag (+42% held-out)"
     assert draw(blender, panels.GG_PT_stages)[-2:] == [

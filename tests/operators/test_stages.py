@@ -2,6 +2,8 @@
 and plays back with its body; a missing model is one error line saying which stage makes it."""
 from __future__ import annotations
 
+import importlib
+
 import pytest
 
 from gg_core.body.model import load_body
@@ -46,3 +48,13 @@ def test_a_missing_model_names_the_stage_that_makes_it(blender, tmp_path):
     settings.simulation_model = "behaviour"
     with pytest.raises(RuntimeError, match=r"gg: error: no stage4/behavior.npz in the project, .*run Fit Behaviour"):
         blender.ops.gg.simulate_garment()
+
+
+def test_diagnose_physics_passes_the_panel_mass_spread(blender, extension_package, tmp_path):
+    diagnose_arguments = importlib.import_module(f"{extension_package.__name__}.operators.stages").diagnose_arguments
+    settings = blender.context.scene.gg
+    settings.capture_path, settings.project_path = str(tmp_path / "capture"), str(tmp_path / "project")
+    assert diagnose_arguments(blender.context)[-2:] == ["--vertex-mass", "area"]
+    settings.diagnose_vertex_mass = "uniform"
+    assert diagnose_arguments(blender.context) == [str(tmp_path / "capture"), "--project", str(tmp_path / "project"),
+                                                   "--vertex-mass", "uniform"]

@@ -73,13 +73,14 @@ def shrunk_strip(scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, list
 
 
 def write_sim_capture(root: Path, extra: dict[str, dict] | None = None, n_frames: int = 16,
-                      region: tuple[np.ndarray, dict[str, float]] | None = None) -> Path:
+                      region: tuple[np.ndarray, dict[str, float]] | None = None, uniform_mass: bool = False) -> Path:
     """Sequences a, b (train) and c (held out) of the sheet simulated with the default model (its air damping
-    included) plus `extra`, and a `region` [V] of it changed by log-scales (library.apply_region)."""
+    included) plus `extra`, and a `region` [V] of it changed by log-scales (library.apply_region); `uniform_mass`:
+    every vertex the same mass, as Blender's cloth (the sheet's border then weighs twice its share, corners more)."""
     extra = extra or {}
     bv, bf = uv_sphere(0.1, 12, 24, center=(0.0, 1.0, 0.0))
     v, f, pinned = hanging_sheet()
-    cloth = Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **MATERIAL))
+    cloth = Cloth(v, f, pinned=pinned, material=Material.uniform(len(v), **MATERIAL), uniform_mass=uniform_mass)
     if region is not None:
         apply_region(cloth, *region)
     terms = make_terms(["gravity", "stretching", "bending", "mass_damping"] + list(extra), extra)

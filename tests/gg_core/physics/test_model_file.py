@@ -42,10 +42,23 @@ def test_older_files_load_without_terms_and_mismatched_arrays_are_refused(tmp_pa
               **{n: getattr(cloth.material, n).numpy() for n in MATERIAL_NAMES}}
     np.savez(tmp_path / "old.npz", **arrays)
     old = read_model(tmp_path / "old.npz")
-    assert old.terms is None and not old.cloth.flat and not old.cloth.pinned.any()
+    assert old.terms is None and not old.cloth.flat and not old.cloth.pinned.any() and not old.cloth.uniform_mass
     np.savez(tmp_path / "short.npz", **{**arrays, "density": np.ones(len(v) - 1)})
     with pytest.raises(ValueError, match="do not match the 16-vertex template"):
         read_model(tmp_path / "short.npz")
     np.savez(tmp_path / "empty.npz", template=v, faces=f)
     with pytest.raises(ValueError, match="no rest_lengths"):
         read_model(tmp_path / "empty.npz")
+
+
+def test_uniform_vertex_mass_is_stored_and_spreads_the_same_total_mass_evenly(tmp_path):
+    v, f = sheet(4, 3, 0.4, 0.3)
+    lumped = Cloth(v, f, material=Material.uniform(len(v), density=0.2))
+    even = Cloth(v, f, material=Material.uniform(len(v), density=0.2), uniform_mass=True)
+    m_lumped, m_even = lumped.numeric().mass, even.numeric().mass
+    assert m_lumped.max() > 2 * m_lumped.min()                  # corners carry a quarter of an inner vertex's area
+    np.testing.assert_allclose(m_even, m_lumped.sum() / len(v))
+    arrays = model_arrays(even, make_terms(["gravity"]), np.zeros(len(v), bool))
+    model = read_model(write_npz(tmp_path / "model.npz", **arrays))
+    assert model.cloth.uniform_mass
+    np.testing.assert_allclose(model.cloth.numeric().mass, m_even)
