@@ -132,8 +132,8 @@ def run(args: argparse.Namespace) -> int:
         if fitted.cloth.n_vertices != len(verts) or len(fitted.cloth.rest_lengths) != len(cloth.rest_lengths):
             raise InputError("fitted behaviour belongs to another garment mesh", args.behavior,
                              "simulate the garment the behaviour was fitted on (same vertices and faces)")
-        cloth.material, cloth.rest_lengths, cloth.flat = (fitted.cloth.material, fitted.cloth.rest_lengths,
-                                                          fitted.cloth.flat)
+        cloth.material, cloth.rest_lengths = fitted.cloth.material, fitted.cloth.rest_lengths
+        cloth.flat, cloth.uniform_mass = fitted.cloth.flat, fitted.cloth.uniform_mass
     cloth.pinned = _pinned(args, cloth, body[0], collider)
     try:
         stored = [(n, {}) for n in DEFAULT_TERMS] if fitted is None or fitted.terms is None else fitted.terms
@@ -166,7 +166,8 @@ def run(args: argparse.Namespace) -> int:
         "vertices": len(verts), "pinned_vertices": int(cloth.pinned.sum()),
         "seconds": seconds, "fps": (len(body) - 1) / seconds,
         "penetration": penetration_stats(traj, body, collider),
-        "terms": [t.describe() for t in terms], "material": cloth.material.summary()})
+        "terms": [t.describe() for t in terms], "material": cloth.material.summary(),
+        "vertex_mass": "uniform" if cloth.uniform_mass else "area"})
     progress.done(str(report))
     if args.progress != "jsonl":
         print(json.dumps(json.loads(report.read_text())["penetration"] | {"out": str(args.out)}))

@@ -106,7 +106,7 @@ def test_a_model_file_simulates_with_its_own_terms_and_the_command_line_override
         write_ply(tmp_path / "body" / f"{k:04d}.ply", bv, bf)
     v, f = sheet(4, 4, 0.3, 0.3)
     terms = make_terms(list(DEFAULT_TERMS) + ["gravity_offset"], {"gravity_offset": {"delta_g": (3.0, 0.0, 0.0)}})
-    write_npz(tmp_path / "model.npz", **model_arrays(Cloth(v, f), terms, np.zeros(len(v), bool)))
+    write_npz(tmp_path / "model.npz", **model_arrays(Cloth(v, f, uniform_mass=True), terms, np.zeros(len(v), bool)))
 
     def drift(*extra: str) -> tuple[float, list[str]]:
         out = tmp_path / f"out{len(list(tmp_path.glob('out*')))}"
@@ -114,6 +114,7 @@ def test_a_model_file_simulates_with_its_own_terms_and_the_command_line_override
                      "--out", str(out), "--pin", "none", "--progress", "none", *extra]) == 0
         last, _ = read_mesh(sorted(out.glob("*.ply"))[-1])
         report = json.loads((out / "simulate.json").read_text())
+        assert report["vertex_mass"] == "uniform"          # the model's mass spread is kept
         return float(last[:, 0].mean() - v[:, 0].mean()), [t["name"] for t in report["terms"]]
 
     along, names = drift()
