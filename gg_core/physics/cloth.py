@@ -84,7 +84,8 @@ class Cloth:
     uniform_mass: every vertex carries the same share of the mass (density x the mean vertex area), as Blender's
     cloth gives each vertex its `mass` setting, instead of density x its own lumped area (a real fabric). On the
     benchmark skirt the two differ 4x at the hem ring; refitting air damping s5 (true alpha 10 /s) on every
-    recording with each: alpha 11.3 /s (area) against 10.5 /s (uniform), free rollouts 5.92 against 5.51 mm.
+    recording with each: alpha 11.3 /s (area) against 10.5 /s (uniform), free rollouts 5.92 against 5.51 mm; with
+    nothing hidden it predicted held-out recordings no better (README, session 68), so it is not the default.
     """
 
     template: np.ndarray                 # [V,3] float64, metres, +Y up
