@@ -52,6 +52,15 @@ def add_source_option(parser: argparse.ArgumentParser) -> None:
                              "every sequence, else gt")
 
 
+def add_vertex_mass_option(parser: argparse.ArgumentParser, more_help: str = "") -> None:
+    from .stages.motion import VERTEX_MASS  # noqa: PLC0415 - light (no torch), keeps the choices in one place
+
+    parser.add_argument("--vertex-mass", choices=VERTEX_MASS, default="area",
+                        help="how the garment's mass is spread: area = by each vertex's share of the surface (a real "
+                             "fabric); uniform = the same on every vertex, as Blender's cloth does (for captures "
+                             "Blender simulated)" + more_help)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gg", description="Gaussian Garments: simulation-ready garment assets "
                                      "from multi-view video.")

@@ -44,6 +44,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..cli import add_vertex_mass_option
 from ..diagnosis.blender_units import offset_tilt, truth_parameters, wind_push
 from ..storage import exclusive
 
@@ -87,10 +88,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rest-given", action="store_true",
                         help="give each diagnosis the garment's unloaded template as its rest mesh (gg diagnose "
                              "--rest-mesh), as a user with the sewing pattern could; default: the first frame")
-    parser.add_argument("--vertex-mass", choices=("area", "uniform"), default="area",
-                        help="gg diagnose --vertex-mass: uniform gives the diagnosis Blender's convention (every "
-                             "vertex the same mass), which a user knowing the data came from Blender's cloth could; "
-                             "projects then end in _um")
+    add_vertex_mass_option(parser, "; a user knowing the data came from Blender's cloth could give uniform. "
+                                   "Projects then end in _um")
     parser.add_argument("--cloth-steps", type=int, default=CLOTH_STEPS,
                         help="Blender's cloth steps per frame (Quality Steps) of the captures; the step change is "
                              "measured against twice as many. Captures at other than Blender's own default (5) are "

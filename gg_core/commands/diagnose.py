@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..cli import add_progress_option, add_sim_vertices_option, add_source_option
+from ..cli import add_progress_option, add_sim_vertices_option, add_source_option, add_vertex_mass_option
 
 HELP = "missing-physics diagnosis: residual map and curve, named effect, refit, held-out rollout error before/after"
 
@@ -31,10 +31,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rest-mesh", type=Path, default=None,
                         help="the garment unloaded (e.g. from its sewing pattern), in the observed meshes' topology; "
                              "default: the first training frame, a loaded state the fits then compensate for")
-    parser.add_argument("--vertex-mass", choices=("area", "uniform"), default="area",
-                        help="how the garment's mass is spread: area = by each vertex's share of the surface (a real "
-                             "fabric); uniform = the same on every vertex, as Blender's cloth does (for captures "
-                             "Blender simulated)")
+    add_vertex_mass_option(parser)
     parser.add_argument("--baseline-iterations", type=int, default=15,
                         help="L-BFGS iterations of the global baseline fit")
     parser.add_argument("--refit-iterations", type=int, default=8,

@@ -55,14 +55,13 @@ from ..jobs import Progress
 from ..parallel import check_workers
 from ..storage import atomic_path, file_stamps, write_json, write_npz, write_report
 from .behavior import attached_vertices, hand_mask, split
-from .motion import SIM_VERTICES, garment_files, inputs_key, load_sequence, resolve_source, simulation_mesh
+from .motion import SIM_VERTICES, VERTEX_MASS, garment_files, inputs_key, load_sequence, resolve_source, simulation_mesh
 
 if TYPE_CHECKING:
     from ..physics.fitting import Observed
 
 STAGE = "diagnose"
 DENOISE = ("auto", "on", "off")
-VERTEX_MASS = ("area", "uniform")
 DENOISE_ABOVE_MM = 0.5    # noise-free benchmark sequences estimate at 0.03-0.2 mm (contacts), noisy ones at sigma
 
 

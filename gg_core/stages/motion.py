@@ -24,6 +24,7 @@ if TYPE_CHECKING:   # torch stays out of `gg --help`, which lists SOURCES
     from ..physics.fitting import Observed
 
 SOURCES = ("auto", "registered", "gt")
+VERTEX_MASS = ("area", "uniform")   # how the simulated garment spreads its mass (physics.cloth.Cloth.uniform_mass)
 SIM_VERTICES = 1200     # default: finer observed meshes are simulated on a remeshed copy of about this many vertices
 
 
