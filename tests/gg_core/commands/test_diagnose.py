@@ -34,7 +34,7 @@ def test_the_command_line_defaults_are_the_requests_and_parsing_imports_no_torch
     from gg_core.stages.diagnose import DiagnoseRequest  # noqa: PLC0415
 
     args = build_parser().parse_args(["diagnose", str(tmp_path), "--project", str(tmp_path / "p")])
-    for name in ("min_gain", "min_gain_mm", "bootstrap", "max_samples", "fit_horizon", "substeps"):
+    for name in ("min_gain", "min_gain_mm", "bootstrap", "max_samples", "fit_horizon", "substeps", "vertex_mass"):
         assert getattr(args, name) == getattr(DiagnoseRequest, name), name
     probe = "import sys; from gg_core.cli import build_parser; build_parser(); print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
