@@ -61,13 +61,6 @@ def add_vertex_mass_option(parser: argparse.ArgumentParser, more_help: str = "")
                              "Blender simulated)" + more_help)
 
 
-def add_noise_replicas_option(parser: argparse.ArgumentParser, more_help: str = "") -> None:
-    parser.add_argument("--noise-replicas", type=int, default=0,
-                        help="second draws of a smoothed sequence's own noise; the fits extrapolate their loss from "
-                             "them to no noise, where noise would otherwise bias the fitted material (default 0: fit "
-                             "the smoothed sequences as they are)" + more_help)
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gg", description="Gaussian Garments: simulation-ready garment assets "
                                      "from multi-view video.")

@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..cli import add_noise_replicas_option, add_vertex_mass_option
+from ..cli import add_vertex_mass_option
 from ..diagnosis.blender_units import offset_tilt, truth_parameters, wind_push
 from ..storage import exclusive
 
@@ -96,7 +96,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
                              "cached under names ending in _q<steps>")
     parser.add_argument("--fit-horizon", type=int, default=3,
                         help="frames each fitted observed state is predicted ahead (gg diagnose --fit-horizon)")
-    add_noise_replicas_option(parser, "; projects with replicas end in _r<number>")
 
 
 def preset(frames: int, vertices: int, cloth_steps: int = CLOTH_STEPS):
@@ -283,8 +282,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     divergence = reference_divergence_of(args, name, seed, hidden, params)
     truth = json.loads((capture / "truth.json").read_text())
     true_class = SYNTH_EFFECT_CLASS[truth["effect"]["name"]]
-    suffix = (("_rest" if args.rest_given else "") + ("_um" if args.vertex_mass == "uniform" else "")
-              + (f"_r{args.noise_replicas}" if args.noise_replicas != DiagnoseRequest.noise_replicas else ""))
+    suffix = ("_rest" if args.rest_given else "") + ("_um" if args.vertex_mass == "uniform" else "")
     project = args.cache / "projects" / f"{name}_noise{noise:g}{suffix}"
     reference, region_path = [], ""
     if true_class != "none":
@@ -298,7 +296,7 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
     request = DiagnoseRequest(capture=capture, project=project, noise_mm=noise, seed=seed, bootstrap=args.bootstrap,
                               fit_horizon=args.fit_horizon, reference=reference, reference_region=region_path,
                               rest_mesh=str(capture / "gt" / "template.obj") if args.rest_given else "",
-                              vertex_mass=args.vertex_mass, noise_replicas=args.noise_replicas,
+                              vertex_mass=args.vertex_mass,
                               progress="none")
     report = json.loads(run_diagnose(request).read_text())
     true_model = true_model_l2(request, report)
@@ -320,7 +318,6 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         "capture": name, "effect": effect, "strength": strength, "seed": seed, "noise_mm": noise,
         "truth_simulator": args.truth_simulator, "rest_given": args.rest_given,
         "vertex_mass": args.vertex_mass,
-        "noise_replicas": args.noise_replicas,
         "true_class": true_class, "predicted": predicted, "accepted": report["accepted"],
         "correct": predicted == true_class,
         "proposed": report["selection"]["order"],

@@ -5,8 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..cli import (add_noise_replicas_option, add_progress_option, add_sim_vertices_option, add_source_option,
-                   add_vertex_mass_option)
+from ..cli import add_progress_option, add_sim_vertices_option, add_source_option, add_vertex_mass_option
 
 HELP = "missing-physics diagnosis: residual map and curve, named effect, refit, held-out rollout error before/after"
 
@@ -26,7 +25,6 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--denoise", choices=("auto", "on", "off"), default="auto",
                         help="smooth the sequences in time before diagnosing: auto = when the noise estimated from "
                              "the data exceeds 0.5 mm (noisy velocities make any damping look right)")
-    add_noise_replicas_option(parser)
     parser.add_argument("--attach-tol-mm", type=float, default=3.0,
                         help="vertices that stay this close to a fixed place on the body are attached (pinned)")
     add_sim_vertices_option(parser)
@@ -63,8 +61,7 @@ def run(args: argparse.Namespace) -> int:
 
     req = DiagnoseRequest(capture=args.capture, project=args.project, source=args.source, train=args.train,
                           heldout=args.heldout, noise_mm=args.noise_mm, noise_length_mm=args.noise_length_mm,
-                          denoise=args.denoise, noise_replicas=args.noise_replicas,
-                          attach_tol_mm=args.attach_tol_mm, sim_vertices=args.sim_vertices,
+                          denoise=args.denoise, attach_tol_mm=args.attach_tol_mm, sim_vertices=args.sim_vertices,
                           rest_mesh=str(args.rest_mesh or ""), vertex_mass=args.vertex_mass,
                           fps=args.fps, substeps=args.substeps, seed=args.seed,
                           baseline_iterations=args.baseline_iterations, refit_iterations=args.refit_iterations,

@@ -215,8 +215,8 @@ def write_html(path: Path, report: dict, vertices: np.ndarray, faces: np.ndarray
     if noise:
         levels = ", ".join(f"{n} {v:.2f} mm" for n, v in noise["noise_estimate_mm"].items())
         verdict += (f"<p>Estimated position noise: {html.escape(levels)}; "
-                    + (f"sequences smoothed in time (Savitzky-Golay, {html.escape(_filters(noise['filter']))}; "
-                       "ends dropped)." if noise["smoothed"] else "no smoothing.") + "</p>")
+                    + ("sequences smoothed in time (Savitzky-Golay, {window} frames, ends dropped).".format(
+                        **noise["filter"]) if noise["smoothed"] else "no smoothing.") + "</p>")
     verdict += _baseline_paragraph(report["baseline"])
     loc = report["localization"]
     rows = "".join(
@@ -291,11 +291,6 @@ def _field_rolled_out(rollouts: dict) -> str:
     return (f"; a change of x{rollouts['scale']:.2f} there takes the training rollouts' error from "
             f"{rollouts['train_rollout_l2_before'] * 1e3:.1f} to {rollouts['train_rollout_l2'] * 1e3:.1f} mm before "
             f"any refit, better than the patches the residual proposed")
-
-
-def _filters(chosen: dict) -> str:
-    """Each sequence's smoothing filter: 'walk 9 frames of order 5, ...'."""
-    return ", ".join(f"{n} {w} frames of order {chosen['order'][n]}" for n, w in chosen["window"].items())
 
 
 def _baseline_paragraph(baseline: dict) -> str:

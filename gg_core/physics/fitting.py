@@ -37,9 +37,6 @@ class Observed:
     garment: np.ndarray
     body: np.ndarray | None
     fps: float
-    # the same recording with a second draw of its own noise (gg_core/diagnosis/noise.py: noise_replicas), smoothed
-    # like `garment`: teacher-forced fits subtract the loss increase it causes (TeacherForced says why)
-    replicas: tuple[np.ndarray, ...] = ()
 
 
 def _limited(term: Term, key: str, raw: torch.Tensor) -> torch.Tensor:
@@ -123,8 +120,7 @@ class _Sample:
     v: np.ndarray             # observed velocity at t (frames t-1, t)
     body: np.ndarray | None   # body at t .. t+H [H+1,Vb,3]
     target: np.ndarray        # observed x_{t+1} .. x_{t+H} [H,V,3] (also the pinned vertices' positions)
-    weight: float             # of its squared error in the loss (TeacherForced: 2 and -1 with noise replicas)
-    first: StepInputs | None = None     # the first substep's inputs depend on observations only: prepared once
+    first: StepInputs         # the first substep's inputs depend on observations only: prepared once
 
     def observed(self, f: int) -> np.ndarray:
         """Observed positions at frame t + f."""
@@ -146,14 +142,7 @@ class TeacherForced:
     the substeps: each substep's end state solves grad E = 0, and its inputs x_prev, v_prev = (y_{s-1} -
     y_{s-2}) / h carry the sensitivity back to the earlier substeps (contact planes and normals are lagged
     inputs, held fixed). With a horizon of several frames the loss compares every frame's end state, so
-    dissipation, which one frame barely shows, accumulates where the fit can see it.
-
-    Noisy (smoothed) sequences carry errors in the observed states the predictions start from, and a fit absorbs
-    them in the parameters: the expected loss is the noise-free loss plus a noise term that depends on the
-    parameters, linear in the noise variance while the step is near linear in the state. Sequences with noise
-    replicas (Observed.replicas: the same recording with a second draw of noise, twice the variance) are fitted
-    on 2 L(observed) - mean L(replicas), the loss extrapolated to no noise (SIMEX on the objective), each replica
-    predicting the same states. The reported one-frame error stays that of the observed sequences."""
+    dissipation, which one frame barely shows, accumulates where the fit can see it."""
 
     def __init__(self, sim: ImplicitSimulator, sequences: list[Observed], max_samples: int | None = None,
                  seed: int = 0, refinements: int = 3, horizon: int = 1) -> None:
@@ -165,16 +154,13 @@ class TeacherForced:
             keep = np.sort(np.random.default_rng(seed).choice(len(frames), max_samples, replace=False))
             frames = [frames[i] for i in keep]
         for obs, t in frames:
+            g, b = obs.garment, obs.body
             if abs(1.0 / obs.fps - sim.dt * sim.substeps) > 1e-9:
                 raise ValueError(f"sequence {obs.name} runs at {obs.fps} fps, the simulator at {sim.fps}")
-            body = None if obs.body is None else obs.body[t:t + horizon + 1]
-            weighted = [(obs.garment, 2.0 if obs.replicas else 1.0)]
-            weighted += [(r, -1.0 / len(obs.replicas)) for r in obs.replicas]
-            for g, weight in weighted:
-                sample = _Sample(g[t], (g[t] - g[t - 1]) * obs.fps, body, g[t + 1:t + horizon + 1], weight)
-                sample.first = self._prepare(sample, 0, sample.x, sample.v)
-                self.samples.append(sample)
-        self.observed = len(frames)
+            sample = _Sample(g[t], (g[t] - g[t - 1]) * obs.fps, None if b is None else b[t:t + horizon + 1],
+                             g[t + 1:t + horizon + 1], first=None)
+            sample.first = self._prepare(sample, 0, sample.x, sample.v)
+            self.samples.append(sample)
         self.free = sim.cloth.numeric().free
         self.refinements = refinements
 
@@ -216,17 +202,16 @@ class TeacherForced:
         num = sim.num
         free = self.free[:, None]
         n = sim.substeps
-        scale = 1.0 / (self.observed * self.horizon * max(float(self.free.sum()), 1.0))
+        scale = 1.0 / (len(self.samples) * self.horizon * max(float(self.free.sum()), 1.0))
         chains, systems, loss, dist = [], [], 0.0, 0.0
         rhs = [[] for _ in range(self.horizon)]
         for s in self.samples:
             chain = self._frame(s)
             for f in range(self.horizon):
                 r = (chain[(f + 1) * n - 1][0] - s.target[f]) * free
-                loss += float((r * r).sum()) * scale * s.weight
-                if s.weight > 0:
-                    dist += float(np.linalg.norm(r, axis=1).sum()) * scale
-                rhs[f].append(2 * r * scale * s.weight)
+                loss += float((r * r).sum()) * scale
+                dist += float(np.linalg.norm(r, axis=1).sum()) * scale
+                rhs[f].append(2 * r * scale)
             chains.append(chain)
             if trainable:
                 per_step = []
@@ -394,7 +379,7 @@ def minimize_lbfgs(sim: ImplicitSimulator, params: BehaviorParams, trainable: li
         loss, grads = evaluate()
         if loss < best[0]:
             best[:] = [loss, params.state()]
-        scale.append(scale[0] if scale else 1.0 / max(abs(loss), 1e-30))
+        scale.append(scale[0] if scale else 1.0 / max(loss, 1e-30))
         for t, g in zip(trainable, grads):
             t.grad = g * scale[0] * (params.free_global if t is params.global_z else 1.0)
         return torch.tensor(loss * scale[0], dtype=torch.float64)

@@ -48,8 +48,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..capture.layout import Capture
-from ..diagnosis.noise import (SMOOTH_WINDOW, choose_filter, correlated_noise, noise_level, noise_replicas,
-                               smooth_in_time)
+from ..diagnosis.noise import SMOOTH_ORDER, SMOOTH_WINDOW, correlated_noise, noise_level, smooth_in_time
 from ..errors import InputError
 from ..geometry.meshio import read_mesh, write_ply
 from ..jobs import Progress
@@ -76,9 +75,6 @@ class DiagnoseRequest:
     noise_mm: float = 0.0              # spatially correlated noise added to the garment meshes (std, mm)
     noise_length_mm: float = 50.0      # its correlation length
     denoise: str = "auto"              # temporal smoothing: auto (when the estimated noise exceeds 0.5 mm), on, off
-    noise_replicas: int = 0            # second draws of a smoothed sequence's noise: fits extrapolate their loss to
-                                       # no noise (fitting.TeacherForced); 0: fit the smoothed sequences as they are
-                                       # (measured, session 70: 1 did not help, noise.py says where)
     attach_tol_mm: float = 3.0
     sim_vertices: int = SIM_VERTICES   # finer meshes are simulated on a remeshed copy (motion.simulation_mesh)
     fps: float = 30.0
@@ -109,12 +105,10 @@ class DiagnoseRequest:
 
 @dataclass
 class Denoising:
-    """Per-sequence noise estimates (mm, before smoothing), whether the sequences were smoothed in time, and with
-    which Savitzky-Golay filter each (window, order: noise.choose_filter)."""
+    """Per-sequence noise estimates (mm, before smoothing) and whether the sequences were smoothed in time."""
 
     noise_mm: dict[str, float]
     smoothed: bool
-    filters: dict[str, tuple[int, int]] = field(default_factory=dict)
 
     @property
     def level_mm(self) -> float:
@@ -122,19 +116,15 @@ class Denoising:
 
     def to_json(self) -> dict:
         return {"noise_estimate_mm": self.noise_mm, "smoothed": self.smoothed,
-                "filter": {"kind": "savitzky-golay", "chosen_by": "stein unbiased risk estimate",
-                           "window": {n: w for n, (w, _) in self.filters.items()},
-                           "order": {n: o for n, (_, o) in self.filters.items()},
+                "filter": {"kind": "savitzky-golay", "window": SMOOTH_WINDOW, "order": SMOOTH_ORDER,
                            "frames_dropped_at_each_end": SMOOTH_WINDOW // 2}
                 if self.smoothed else None}
 
 
 def denoise(req: DiagnoseRequest, loaded: dict) -> Denoising:
     """Estimate every sequence's noise and, if asked or (auto) if the median estimate is above DENOISE_ABOVE_MM,
-    smooth all of them in time, in place, each with the filter its own data choose (noise.choose_filter), dropping
-    the SMOOTH_WINDOW // 2 frames at each end of every sequence (garment and body) where a filter may not be
-    centred (noise.py says why: noise makes any damping look right). With req.noise_replicas, each sequence also
-    gets that many second draws of its noise, smoothed alike (Observed.replicas)."""
+    smooth all of them in time, in place, dropping the SMOOTH_WINDOW // 2 frames at each end of every sequence
+    (garment and body) where the filter is not centred (noise.py says why: noise makes any damping look right)."""
     levels = {n: noise_level(obs.garment) * 1e3 for n, (obs, _, _) in loaded.items()}
     result = Denoising(levels, False)
     result.smoothed = req.denoise == "on" or (req.denoise == "auto" and result.level_mm > DENOISE_ABOVE_MM)
@@ -144,11 +134,8 @@ def denoise(req: DiagnoseRequest, loaded: dict) -> Denoising:
         if short:
             raise InputError(f"sequences {short} are too short to smooth in time ({SMOOTH_WINDOW + 3} frames needed)",
                              req.capture, "record longer sequences, or pass --denoise off")
-        rng = np.random.default_rng([req.seed, 1])
-        for name, (obs, _, _) in loaded.items():
-            window, order = result.filters[name] = choose_filter(obs.garment, levels[name] * 1e-3)
-            obs.replicas = tuple(noise_replicas(obs.garment, req.noise_replicas, rng, window, order))
-            obs.garment = smooth_in_time(obs.garment, window, order)
+        for obs, _, _ in loaded.values():
+            obs.garment = smooth_in_time(obs.garment)
             obs.body = None if obs.body is None else obs.body[h:len(obs.body) - h]
     return result
 
@@ -249,9 +236,6 @@ def run_diagnose(req: DiagnoseRequest) -> Path:
     if req.vertex_mass not in VERTEX_MASS:
         raise InputError(f"unknown vertex mass '{req.vertex_mass}'", "--vertex-mass",
                          f"choose one of: {', '.join(VERTEX_MASS)}")
-    if req.noise_replicas < 0:
-        raise InputError(f"--noise-replicas must be at least 0, got {req.noise_replicas}", "--noise-replicas",
-                         "pass 0 to fit the smoothed sequences as they are, or 1 or more")
     check_workers(req.workers)
     start = time.perf_counter()
     capture = Capture(req.capture)

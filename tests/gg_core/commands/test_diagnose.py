@@ -34,8 +34,7 @@ def test_the_command_line_defaults_are_the_requests_and_parsing_imports_no_torch
     from gg_core.stages.diagnose import DiagnoseRequest  # noqa: PLC0415
 
     args = build_parser().parse_args(["diagnose", str(tmp_path), "--project", str(tmp_path / "p")])
-    for name in ("min_gain", "min_gain_mm", "bootstrap", "max_samples", "fit_horizon", "substeps", "vertex_mass",
-                 "noise_replicas"):
+    for name in ("min_gain", "min_gain_mm", "bootstrap", "max_samples", "fit_horizon", "substeps", "vertex_mass"):
         assert getattr(args, name) == getattr(DiagnoseRequest, name), name
     probe = "import sys; from gg_core.cli import build_parser; build_parser(); print('torch' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
@@ -54,13 +53,6 @@ def test_diagnose_refuses_zero_workers_with_one_line(tmp_path, capsys):
     assert main(["diagnose", str(capture), "--project", str(tmp_path / "p"), "--workers", "0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--workers must be at least 1" in err[0]
-
-
-def test_diagnose_refuses_negative_noise_replicas_with_one_line(tmp_path, capsys):
-    capture = write_sim_capture(tmp_path / "capture", n_frames=10)
-    assert main(["diagnose", str(capture), "--project", str(tmp_path / "p"), "--noise-replicas", "-1"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--noise-replicas must be at least 0" in err[0]
 
 
 def test_diagnose_refuses_a_rest_mesh_of_another_topology_with_one_line(tmp_path, capsys):

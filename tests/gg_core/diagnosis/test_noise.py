@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gg_core.diagnosis.noise import (FILTERS, SMOOTH_WINDOW, choose_filter, correlated_noise, noise_level,
-                                    noise_replicas, smooth_in_time)
+from gg_core.diagnosis.noise import SMOOTH_WINDOW, correlated_noise, noise_level, smooth_in_time
 
 
 def test_noise_has_the_asked_std_and_spatial_correlation():
@@ -51,40 +50,3 @@ def test_smoothing_keeps_cubic_motion_and_removes_most_noise():
     assert velocity_error(smooth_in_time(clean + noise), clean[h:-h]) < 0.35 * velocity_error(clean + noise, clean)
     with pytest.raises(ValueError, match="too few"):
         smooth_in_time(clean[:SMOOTH_WINDOW - 1])
-
-
-def test_noise_replicas_add_the_observed_noise_again():
-    """A replica is the smoothed recording with a second draw of its noise: what it adds to the smoothed
-    recording has the variance and the spatial correlation of what the noise left in it, drawn independently."""
-    rng = np.random.default_rng(5)
-    grid = np.stack(np.meshgrid(np.linspace(0, 0.6, 15), np.linspace(0, 0.6, 15)), -1).reshape(-1, 2)
-    template = np.c_[grid[:, 0], np.zeros(len(grid)), grid[:, 1]]
-    t = np.arange(120)[:, None, None] / 30.0
-    clean = template[None] + 0.05 * np.sin(2 * np.pi * 0.8 * t + template[None, :, :1] * 3)
-    noisy = clean + correlated_noise(template, 0.0015, 0.05, len(t), rng)
-    h = SMOOTH_WINDOW // 2
-    left = smooth_in_time(noisy) - clean[h:-h]
-    replicas = noise_replicas(noisy, 2, rng)
-    assert len(replicas) == 2 and replicas[0].shape == left.shape
-    added = [r - smooth_in_time(noisy) for r in replicas]
-    for a in added:
-        assert a.std() == pytest.approx(left.std(), rel=0.2)
-        assert abs(np.corrcoef(a.ravel(), left.ravel())[0, 1]) < 0.1        # a fresh draw, not the same noise
-        neighbours = np.corrcoef(a[:, 7 * 15 + 7, 0], a[:, 7 * 15 + 8, 0])[0, 1]
-        assert neighbours > 0.7                                             # 4 cm apart: still moves together
-    assert abs(np.corrcoef(added[0].ravel(), added[1].ravel())[0, 1]) < 0.1
-
-
-@pytest.mark.parametrize("hz", [0.8, 2.5])
-def test_the_chosen_filter_is_the_one_closest_to_the_noise_free_motion(hz):
-    """Stein's risk estimate, from the noisy data alone, picks the filter whose output is (near) closest to the
-    clean motion: a long cubic for slow motion, a shorter or higher-order one where the motion is fast."""
-    t = np.arange(40)[:, None, None] / 30.0
-    base = np.random.default_rng(6).uniform(-0.2, 0.2, (1, 200, 3))
-    clean = base + 0.05 * np.sin(2 * np.pi * hz * t + base[..., :1] * 3)
-    noisy = clean + np.random.default_rng(7).normal(0, 0.0015, clean.shape)
-    h = SMOOTH_WINDOW // 2
-    error = {f: np.sqrt(((smooth_in_time(noisy, *f) - clean[h:-h]) ** 2).mean()) for f in FILTERS}
-    chosen = choose_filter(noisy, 0.0015)
-    assert error[chosen] <= 1.05 * min(error.values())
-    assert (chosen == (9, 3)) == (hz == 0.8)
