@@ -14,15 +14,6 @@ no region), the activity ratio found a 29-vertex region, 83 % of it on the patch
 vertices, 85 % on the patch (80 % of it). It is not proof of an effect: on the `none` capture of seed 2 it found a
 15-vertex region along the hem (z down to -7.2), whose region trials then gained < 1 % held-out, so confirmation
 said "none". The residual region is the fallback where no activity region stands out.
-
-The activity region grows from its standout core (z beyond REGION_Z) through the connected vertices beyond
-ACTIVITY_GROW_Z, not by a fixed ring (session 72, the stiff-patch capture of seed 1 at 9.81 m/s^2, 35 true
-vertices): the core held 22 vertices, all on the patch; one ring more made 44 (precision 80 %, recall 100 %), growing
-through z beyond 2 makes 33 (94 %, 89 %). Refitted in the three folds that each hold one recording out (offline,
-pipeline._run_fold on each region), the ring's region gained 20.4 / -4.4 / 15.0 % held out, the grown one
-21.7 / 0.7 / 28.3 %, the true region 24.6 / -1.6 / 25.7 %. On the 24 other diagnosed benchmark captures at hand (air
-damping, gravity, wind, `none`) it changes nothing but one: only air damping s5 at 1.5 mm noise has an activity
-region (12 vertices with the ring, 18 this way), and a region is not its answer.
 """
 from __future__ import annotations
 
@@ -38,7 +29,6 @@ from .residuals import Pooling
 
 REGION_Z = 4.0              # robust z-score a vertex must exceed to belong to the standout region
 REGION_MAX_FRACTION = 0.25  # larger "regions" are global effects, not a patch
-ACTIVITY_GROW_Z = 2.0       # the activity region grows from its standout core through vertices beyond this z
 
 
 @dataclass
@@ -78,39 +68,25 @@ def _best(target: np.ndarray, features: dict[str, np.ndarray]) -> tuple[str, flo
     return name, scores[name]
 
 
-def _components(mask: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """[V] connected-component label of each vertex over the edges whose both ends are in `mask`."""
-    keep = mask[edges[:, 0]] & mask[edges[:, 1]]
-    n = len(mask)
-    graph = coo_matrix((np.ones(int(keep.sum())), (edges[keep, 0], edges[keep, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)[1]
-
-
-def standout_region(vertex_map: np.ndarray, free: np.ndarray, edges: np.ndarray, grow_z: float | None = None
-                    ) -> np.ndarray | None:
+def standout_region(vertex_map: np.ndarray, free: np.ndarray, edges: np.ndarray) -> np.ndarray | None:
     """Largest connected set of free vertices whose map value is a robust outlier (median + REGION_Z MADs), grown
-    by one ring, or, with `grow_z`, through every connected vertex beyond median + grow_z MADs (hysteresis: the
-    region follows the map's own edge instead of a fixed ring); None when nothing stands out or the set covers too
-    much of the garment to be a region."""
+    by one ring; None when nothing stands out or the set covers too much of the garment to be a region."""
     values = vertex_map[free]
-    median = np.median(values)
-    mad = max(1.4826 * np.median(np.abs(values - median)), 1e-12)
-    hot = free & (vertex_map > median + REGION_Z * mad)
+    mad = 1.4826 * np.median(np.abs(values - np.median(values)))
+    hot = free & (vertex_map > np.median(values) + REGION_Z * max(mad, 1e-12))
     if hot.sum() < 3:
         return None
-    label = _components(hot, edges)
+    keep = hot[edges[:, 0]] & hot[edges[:, 1]]
+    n = len(vertex_map)
+    graph = coo_matrix((np.ones(int(keep.sum())), (edges[keep, 0], edges[keep, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
     sizes = np.bincount(label[hot], minlength=label.max() + 1)
     region = hot & (label == np.argmax(sizes))
     if region.sum() < 3:
         return None
-    if grow_z is None:
-        grown = region.copy()
-        touch = region[edges[:, 0]] | region[edges[:, 1]]
-        grown[edges[touch].ravel()] = True
-    else:
-        warm = free & (vertex_map > median + grow_z * mad)
-        label = _components(warm, edges)
-        grown = warm & np.isin(label, np.unique(label[region]))
+    grown = region.copy()
+    touch = region[edges[:, 0]] | region[edges[:, 1]]
+    grown[edges[touch].ravel()] = True
     grown &= free
     if grown.sum() > REGION_MAX_FRACTION * free.sum():
         return None
@@ -145,7 +121,7 @@ def activity_region(z: np.ndarray, free: np.ndarray, edges: np.ndarray) -> np.nd
     region). The high side is not used: on the seed-1 benchmark captures with no region stiffness effect (`none`,
     `shrink`) it holds blobs of z 4.8-5.7 just above the hem, where folds flap more in Blender's cloth than in
     ours, while the low side stays above -2.3 there; softer regions are left to the residual region."""
-    return standout_region(-z, free, edges, grow_z=ACTIVITY_GROW_Z)
+    return standout_region(-z, free, edges)
 
 
 def localize(sim: ImplicitSimulator, pooling: Pooling, adjusted: np.ndarray, features: dict[str, np.ndarray],
