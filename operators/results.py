@@ -279,11 +279,12 @@ class GG_OT_show_residuals(_Loader):
 
 def region_groups(report: dict) -> dict[str, list[int]]:
     """Vertex groups of the garment regions region candidates were tried on (select them in Edit Mode): the one
-    the maps singled out, and each scanned candidate's own."""
+    the maps singled out, its grown extent, and each candidate's own where it scanned or chose one."""
     loc = report.get("localization", {})
-    groups = {"gg_region_maps": loc.get("region_vertices") or []}
-    groups.update({f"gg_region_{name}": scan.get("region_vertices") or []
-                   for name, scan in loc.get("scanned_regions", {}).items()})
+    groups = {"gg_region_maps": loc.get("region_vertices") or [],
+              "gg_region_maps_grown": loc.get("grown_region_vertices") or []}
+    for name, own in {**loc.get("scanned_regions", {}), **loc.get("region_choices", {})}.items():
+        groups[f"gg_region_{name}"] = own.get("region_vertices") or []
     return {name: [int(i) for i in indices] for name, indices in groups.items() if indices}
 
 

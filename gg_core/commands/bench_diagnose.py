@@ -233,8 +233,8 @@ def region_overlap(report: dict, name: str | None, truth: np.ndarray | None) -> 
     if name is None or truth is None:
         return None
     loc = report["localization"]
-    scan = loc.get("scanned_regions", {}).get(name)
-    vertices = scan["region_vertices"] if scan is not None else loc.get("region_vertices")
+    own = loc.get("scanned_regions", {}).get(name) or loc.get("region_choices", {}).get(name)
+    vertices = own["region_vertices"] if own is not None else loc.get("region_vertices")
     if not vertices:
         return None
     found = np.zeros(len(truth), bool)

@@ -22,7 +22,7 @@ from .identify import PROFILE_TOLERANCE, profiles
 from .library import BY_NAME, CANDIDATES, Candidate, Context
 from .localize import activity_map, localize
 from .residuals import Pooling, responses
-from .result import Result
+from .result import GROWN, ONE_RING, RegionChoice, Result
 from .scan import scan_region
 from .selection import Design, fit, gram, select
 from .starts import in_form, measure, measured_lag, reference_trials, regressed, trial_from_starts
@@ -74,13 +74,17 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     # come from the baseline fit simply running longer; it and the candidates' refits are independent jobs
     refit_config = fit_config(req, req.refit_iterations)
     proposed = propose(sel, req.min_inclusion, req.max_trials)
-    jobs = [_TrialJob(n, None if n is None else sel.alone[n], sim, ctx if n is None else contexts[n], train, heldout,
-                      attached, refit_config, req.probe_acceleration, baseline_l2, measured_lag(req.source, r))
-            for n in [None, *proposed]]
+    two_regions = [n for n in proposed if loc.grown is not None and BY_NAME[n].needs_region
+                   and BY_NAME[n].region_from == "map"]
+    jobs = [_TrialJob(n, None if n is None else sel.alone[n], sim, trial_ctx, train, heldout, attached, refit_config,
+                      req.probe_acceleration, baseline_l2, measured_lag(req.source, r))
+            for n, trial_ctx in [(None, ctx), *((n, contexts[n]) for n in proposed),
+                                 *((n, replace(contexts[n], region=loc.grown)) for n in two_regions)]]
     null_refit, *refits = run_jobs(_run_trial, jobs, worker_count(req.workers, len(jobs)), progress)
     null = judge_reference(Trial([], baseline_l2, float("nan"), baseline_train_l2), null_refit)
     before = null.heldout_l2
     trials = dict(zip(proposed, refits))
+    region_choices = choose_regions(trials, dict(zip(two_regions, refits[len(proposed):])), contexts, sim)
     unphysical = {n: why for n in proposed if (why := implausible(trials[n], sim.cloth))}
     first = Fold([o.name for o in train], [o.name for o in heldout], null,
                  {n: t for n, t in trials.items() if n not in unphysical})
@@ -150,7 +154,25 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     return Result(loc, sel, trials, accepted, null, null_refit, after, baseline,
                   dict(zip(r.labels, r.adjust.tolist())), r.batch, unphysical, progress, cv, reference, timings, scans,
                   withheld, rollouts_first, rivals, delivered, delivered_sim,
-                  None if accepted else closest(cv, unphysical, req.min_gain, req.min_gain_mm))
+                  None if accepted else closest(cv, unphysical, req.min_gain, req.min_gain_mm), region_choices)
+
+
+def choose_regions(trials: dict[str, Trial], grown: dict[str, Trial], contexts: dict[str, Context],
+                   sim: ImplicitSimulator) -> dict[str, RegionChoice]:
+    """Each map-region candidate refitted on both extents of the activity region (localize.activity_regions) keeps
+    the trial that rolls the training recordings out better, among the physically plausible ones (the ring's where
+    neither is); `trials` and `contexts` are updated in place, so the folds, the joint trial and the final fit use
+    the chosen region. The held-out recordings play no part in the choice."""
+    choices = {}
+    for name, other in grown.items():
+        ring = trials[name]
+        plausible = [t for t in (ring, other) if not implausible(t, sim.cloth)] or [ring]
+        best = min(plausible, key=lambda t: t.train_l2)
+        choices[name] = RegionChoice(best.region, {ONE_RING: ring.train_l2, GROWN: other.train_l2},
+                                     ONE_RING if best is ring else GROWN)
+        trials[name] = best
+        contexts[name] = replace(contexts[name], region=best.region)
+    return choices
 
 
 def _trialled_model(name: str, folds: list[Fold], ctx: Context

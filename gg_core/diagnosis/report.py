@@ -260,6 +260,12 @@ def region_sentence(loc: dict) -> str:
            "residual": "its residual stands out"}.get(loc.get("region_source", ""), "it stands out")
     out = [f"Region candidates act on {len(region)} vertices, singled out because {why}." if region else
            "No garment region stood out in the maps: region candidates that use them were not tried."]
+    for name, choice in loc.get("region_choices", {}).items():
+        l2 = choice["train_rollout_l2"]
+        out.append(f"{name} was refitted on that region and on its extent grown through the neighbouring vertices "
+                   f"that stand out less ({len(loc.get('grown_region_vertices') or [])} vertices); the training "
+                   f"rollouts ({', '.join(f'{k} {1e3 * v:.2f} mm' for k, v in l2.items())}) chose the "
+                   f"{choice['chosen']} extent ({len(choice['region_vertices'])} vertices).")
     for name, scan in loc.get("scanned_regions", {}).items():
         if scan["region_vertices"] and scan.get("source") == "field":
             out.append(f"{name} fitted its change vertex by vertex on the training recordings and acts on the "

@@ -18,6 +18,18 @@ from .scan import ScanResult
 from .selection import Selection
 
 
+ONE_RING, GROWN = "one ring", "grown"   # the activity region's two extents (localize.activity_regions)
+
+
+@dataclass
+class RegionChoice:
+    """A map-region candidate refitted on both extents of the activity region: the training rollout error of each
+    refit and the one kept (pipeline.choose_regions)."""
+    region: np.ndarray
+    train_l2: dict[str, float]         # ONE_RING / GROWN -> training rollout error of the refit on that extent
+    chosen: str
+
+
 @dataclass
 class Result:
     localization: Localization
@@ -42,10 +54,14 @@ class Result:
     final: Trial | None = None         # the accepted model refitted on every recording (pipeline.final_fit) ...
     final_sim: ImplicitSimulator | None = None   # ... and its simulator
     closest: dict | None = None        # where nothing was accepted, the candidate nearest to it (verdict.closest)
+    region_choices: dict[str, RegionChoice] = field(default_factory=dict)   # refitted on both activity extents
 
     def region_of(self, name: str) -> np.ndarray | None:
-        """The region candidate `name` acted on: its scan's, or the localization's."""
-        return self.scans[name].region if name in self.scans else self.localization.region
+        """The region candidate `name` acted on: its scan's, the extent its training rollouts chose, or the
+        localization's."""
+        if name in self.scans:
+            return self.scans[name].region
+        return self.region_choices[name].region if name in self.region_choices else self.localization.region
 
     @property
     def heldout_before(self) -> float:
@@ -166,7 +182,12 @@ class Result:
                                                          "train_rollout_l2_before": r.rollout_l2_before,
                                                          "train_rollout_l2": r.rollout_l2,
                                                          "scale": float(np.exp(r.strength))}}
-                                                 for n, r in self.scans.items()}},
+                                                 for n, r in self.scans.items()},
+                             "region_choices": {n: {"chosen": c.chosen, "train_rollout_l2": c.train_l2,
+                                                    "region_vertices": np.flatnonzero(c.region).tolist()}
+                                                for n, c in self.region_choices.items()},
+                             "grown_region_vertices": None if loc.grown is None
+                             else np.flatnonzero(loc.grown).tolist()},
             "train_rollout_l2_before": self.null.train_l2,
             "null_refit": {"heldout_l2": self.null_refit.heldout_l2, "train_rollout_l2": self.null_refit.train_l2},
             "reference_trials": {n: self.trial_summary(t) for n, t in self.reference.items()},

@@ -175,16 +175,19 @@ def test_activity_map_is_a_second_attribute_with_the_residual_still_shown(blende
 
 def test_tried_regions_become_vertex_groups(blender, tmp_path):
     report = {"verdict": "none", "localization": {
-        "region_vertices": [0, 1], "scanned_regions": {"rest_length_region": {"region_vertices": [2, 3]},
-                                                       "heavy_region": {"region_vertices": None}}}}
+        "region_vertices": [0, 1], "grown_region_vertices": [0, 1, 2],
+        "scanned_regions": {"rest_length_region": {"region_vertices": [2, 3]},
+                            "heavy_region": {"region_vertices": None}},
+        "region_choices": {"region_stiffness": {"chosen": "grown", "region_vertices": [0, 1, 2]}}}}
     _write_diagnosis(tmp_path, report, np.zeros(4))
     blender.context.scene.gg.project_path = str(tmp_path)
     assert blender.ops.gg.show_residuals() == {"FINISHED"}
     obj = blender.data.objects["diagnosis_residual"]
-    assert sorted(g.name for g in obj.vertex_groups) == ["gg_region_maps", "gg_region_rest_length_region"]
-    group = obj.vertex_groups["gg_region_rest_length_region"].index
-    members = [v.index for v in obj.data.vertices if any(g.group == group for g in v.groups)]
-    assert members == [2, 3]
+    assert sorted(g.name for g in obj.vertex_groups) == ["gg_region_maps", "gg_region_maps_grown",
+                                                         "gg_region_region_stiffness", "gg_region_rest_length_region"]
+    for name, expected in (("gg_region_rest_length_region", [2, 3]), ("gg_region_region_stiffness", [0, 1, 2])):
+        group = obj.vertex_groups[name].index
+        assert [v.index for v in obj.data.vertices if any(g.group == group for g in v.groups)] == expected
 
 
 def test_region_beyond_the_mesh_is_refused(blender, tmp_path):

@@ -272,3 +272,5 @@ def test_region_overlap_scores_where_a_region_effect_was_placed():
     assert region_overlap(report, "rest_length_region", truth) == pytest.approx({"precision": 2 / 3, "recall": 0.5})
     assert region_overlap(report, "region_stiffness", truth) == {"precision": 0.0, "recall": 0.0}   # the maps'
     assert region_overlap(report, None, truth) is None and region_overlap(report, "region_stiffness", None) is None
+    report["localization"]["region_choices"] = {"region_stiffness": {"region_vertices": [0, 1, 4]}}
+    assert region_overlap(report, "region_stiffness", truth) == pytest.approx({"precision": 2 / 3, "recall": 0.5})

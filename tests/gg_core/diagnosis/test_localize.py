@@ -1,12 +1,13 @@
 """Localization: a planted hot patch is found as the standout region, a uniform map has none, the map's
 best-correlated feature is reported, and a patch that stretches less than the simulation says is found from the
-deformation activity (a more active one is not: that side is left to the residual)."""
+deformation activity (a more active one is not: that side is left to the residual), in its two extents (one ring,
+hysteresis)."""
 from __future__ import annotations
 
 import numpy as np
 from physics_helpers import sheet
 
-from gg_core.diagnosis.localize import _best, activity_map, activity_region, standout_region, strain_activity
+from gg_core.diagnosis.localize import _best, activity_map, activity_regions, standout_region, strain_activity
 from gg_core.geometry.topology import build_topology
 
 
@@ -24,6 +25,24 @@ def test_standout_region_finds_a_planted_patch():
     assert (found & patch).sum() == patch.sum()             # the whole patch
     assert found.sum() <= patch.sum() + 3 * np.sqrt(patch.sum()) * 4   # plus about one ring
     assert standout_region(1.0 + 0.05 * rng.normal(size=len(v)), free, edges) is None
+
+
+def test_standout_region_grown_by_hysteresis_follows_the_map():
+    """A patch whose map stands out strongly only at its centre: one ring around the centre misses most of the
+    patch; growing through vertices beyond 2 MADs takes all of it and not the background."""
+    v, f = sheet(16, 16, 0.6, 0.6)
+    edges = build_topology(f, len(v)).edges
+    values = 0.05 * np.random.default_rng(3).normal(size=len(v))
+    distance = np.linalg.norm(v[:, [0, 2]] - [0.05, 0.0], axis=1)
+    patch, centre = distance < 0.15, distance < 0.05
+    values[patch] = 0.15                     # about 3 MADs: under REGION_Z, over the growth threshold
+    values[centre] = 1.0
+    free = np.ones(len(v), bool)
+    ring = standout_region(values, free, edges) > 0
+    grown = standout_region(values, free, edges, grow_z=2.0) > 0
+    assert (ring & patch).sum() < patch.sum()
+    assert (grown & patch).sum() == patch.sum()
+    assert (grown & ~patch).sum() <= 0.1 * patch.sum()
 
 
 def test_best_feature_is_the_most_correlated_one():
@@ -61,14 +80,16 @@ def test_activity_region_finds_a_stiffer_patch_only():
     free = np.ones(len(v), bool)
     stiffer, _ = _jiggling_sheet(np.where(patch, 4e-4, 2e-3), seed=2)
     z = activity_map([stiffer], [simulated], edges, free)
-    region = activity_region(z, free, edges)
+    region, grown = activity_regions(z, free, edges)
     assert region is not None
     found = region > 0
     assert (found & patch).sum() == patch.sum()
     # the map is averaged over one ring and the region grown by one: at most two (diagonal) grid spacings beyond
     assert np.linalg.norm(v[found][:, [0, 2]] - [-0.1, 0.05], axis=1).max() < 0.1 + 2 * np.sqrt(2) * 0.0375
+    if grown is not None:                    # the hysteresis extent differs from the ring's, and holds the patch too
+        assert not np.array_equal(grown, region) and (grown[patch] > 0).all()
     same, _ = _jiggling_sheet(np.full(len(v), 2e-3), seed=3)
-    assert activity_region(activity_map([same], [simulated], edges, free), free, edges) is None
+    assert activity_regions(activity_map([same], [simulated], edges, free), free, edges) == (None, None)
     softer, _ = _jiggling_sheet(np.where(patch, 1e-2, 2e-3), seed=4)
     z_soft = activity_map([softer], [simulated], edges, free)
-    assert z_soft[patch].mean() > 4 and activity_region(z_soft, free, edges) is None
+    assert z_soft[patch].mean() > 4 and activity_regions(z_soft, free, edges) == (None, None)

@@ -111,3 +111,30 @@ def test_a_fold_scans_its_own_training_recordings_for_a_scanned_region(monkeypat
     assert set(fold.trials) == {"rest_length_region", "heavy_region"} and fold.heldout == ["c"]
     found = None                                    # this fold's scan finds no region: the candidate is not tried
     assert set(pipeline._run_fold(job, lambda msg: None).trials) == {"heavy_region"}
+
+
+def test_a_map_region_candidate_keeps_the_extent_its_training_rollouts_prefer():
+    """pipeline.choose_regions: refitted on the activity region's one-ring and grown extents, a region candidate
+    keeps the refit that rolls the training recordings out better, unless its values are not cloth (the bounds of
+    its range); the context the folds and the final fit use follows. Held-out errors play no part."""
+    ring, grown = np.array([1.0, 1.0, 0.0, 0.0]), np.array([1.0, 1.0, 1.0, 0.0])
+    inside = {"region.stretch_scale": 2.0, "region.bending_scale": 20.0}
+
+    def refits(ring_train: float, grown_train: float, grown_values: dict) -> tuple[dict, dict, dict]:
+        trials = {"region_stiffness": Trial(["region_stiffness"], 0.001, 1.0, ring_train, inside, region=ring)}
+        other = {"region_stiffness": Trial(["region_stiffness"], 0.009, 1.0, grown_train, grown_values,
+                                           region=grown)}
+        return trials, other, {"region_stiffness": _Region(ring)}
+
+    sim = SimpleNamespace(cloth=None)
+    trials, other, contexts = refits(0.0087, 0.0084, inside)
+    choice = pipeline.choose_regions(trials, other, contexts, sim)["region_stiffness"]
+    assert choice.chosen == "grown" and choice.train_l2 == {"one ring": 0.0087, "grown": 0.0084}
+    assert trials["region_stiffness"] is other["region_stiffness"]          # its held-out error is worse: unseen
+    assert np.array_equal(contexts["region_stiffness"].region, grown) and np.array_equal(choice.region, grown)
+    trials, other, contexts = refits(0.0087, 0.0090, inside)
+    assert pipeline.choose_regions(trials, other, contexts, sim)["region_stiffness"].chosen == "one ring"
+    assert np.array_equal(contexts["region_stiffness"].region, ring)
+    on_ends = {"region.stretch_scale": 0.1, "region.bending_scale": 201.0}   # both fields on the range's ends
+    trials, other, contexts = refits(0.0087, 0.0050, on_ends)
+    assert pipeline.choose_regions(trials, other, contexts, sim)["region_stiffness"].chosen == "one ring"

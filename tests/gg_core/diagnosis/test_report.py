@@ -115,6 +115,12 @@ def testregion_sentence_says_where_each_region_candidate_acted():
     assert "heavy_region scanned the garment patch by patch: no patch explains enough of the residual (best 1.0 %)" \
         in text
     assert region_sentence({}).startswith("No garment region stood out in the maps")
+    chose = {"region_vertices": [5, 6], "grown_region_vertices": [5, 6, 7],
+             "region_choices": {"region_stiffness": {"chosen": "grown", "region_vertices": [5, 6, 7],
+                                                     "train_rollout_l2": {"one ring": 0.00874, "grown": 0.00838}}}}
+    assert ("region_stiffness was refitted on that region and on its extent grown through the neighbouring vertices "
+            "that stand out less (3 vertices); the training rollouts (one ring 8.74 mm, grown 8.38 mm) chose the "
+            "grown extent (3 vertices).") in region_sentence(chose)
 
 
 def test_the_page_says_what_a_none_could_not_see(tmp_path):
