@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from gg_core.diagnosis import confirm
-from gg_core.diagnosis.confirm import (CandidateParams, at_values, central_fit, fitted_trial, golden_section,
-                                      refit_or_scale, rollout_choice, rollout_scale, scale_label)
+from gg_core.diagnosis.confirm import (INWARD, CandidateParams, at_values, central_fit, fitted_trial, golden_section,
+                                      inward_rollout, refit_or_scale, rollout_choice, rollout_scale, scale_label)
 from gg_core.diagnosis.library import BY_NAME, Context
 from gg_core.physics.cloth import Cloth
 from gg_core.physics.contact import BodyCollider
@@ -215,6 +215,24 @@ def test_a_region_the_refit_left_too_soft_is_scaled_on_training_rollouts_within_
         assert error == pytest.approx(rollout_error(sim, observed, pinned)) and error < gain * before
         assert factor > 2.0 and params.values()["material.bending"] == pytest.approx(
             float(hanging(0.0).cloth.material.bending.mean()))   # only the region's scale moved
+
+
+def test_a_region_refit_stopped_on_its_ranges_end_is_rolled_out_inside_it():
+    """confirm.inward_rollout: every region scale on an end of its range is moved INWARD times inside and the
+    training recordings rolled out there, the refit's values then restored; a scale inside the range: no rollout."""
+    observed, pinned = fall(stiff_half(np.log(30.0))[0])
+    sim, params = stiff_half(np.log(30.0), {"bending": (np.log(0.1), np.log(30.0))})   # the truth, on the top end
+    at_end = rollout_error(sim, observed, pinned)
+    inward = inward_rollout(sim, params, [observed], pinned)
+    assert params.values()["region.bending_scale"] == pytest.approx(30.0)
+    assert rollout_error(sim, observed, pinned) == pytest.approx(at_end)          # restored, applied
+    inside, _ = stiff_half(np.log(30.0 / INWARD))
+    assert inward == pytest.approx(rollout_error(inside, observed, pinned)) and inward > at_end
+    sim, params = stiff_half(np.log(0.1), {"bending": (np.log(0.1), np.log(30.0))})     # the bottom end: moved up
+    inside, _ = stiff_half(np.log(0.1 * INWARD))
+    assert inward_rollout(sim, params, [observed], pinned) == pytest.approx(rollout_error(inside, observed, pinned))
+    sim, params = stiff_half(np.log(3.0), {"bending": (np.log(0.1), np.log(30.0))})
+    assert inward_rollout(sim, params, [observed], pinned) is None
 
 
 def _split_fit(density: float, tilt: float = 2.0) -> dict[str, object]:
