@@ -120,10 +120,11 @@ def test_a_map_region_candidate_keeps_the_extent_its_training_rollouts_prefer():
     ring, grown = np.array([1.0, 1.0, 0.0, 0.0]), np.array([1.0, 1.0, 1.0, 0.0])
     inside = {"region.stretch_scale": 2.0, "region.bending_scale": 20.0}
 
-    def refits(ring_train: float, grown_train: float, grown_values: dict) -> tuple[dict, dict, dict]:
+    def refits(ring_train: float, grown_train: float, grown_values: dict, grown_inward: float | None = None
+               ) -> tuple[dict, dict, dict]:
         trials = {"region_stiffness": Trial(["region_stiffness"], 0.001, 1.0, ring_train, inside, region=ring)}
         other = {"region_stiffness": Trial(["region_stiffness"], 0.009, 1.0, grown_train, grown_values,
-                                           region=grown)}
+                                           region=grown, inward_l2=grown_inward)}
         return trials, other, {"region_stiffness": _Region(ring)}
 
     sim = SimpleNamespace(cloth=None)
@@ -135,6 +136,6 @@ def test_a_map_region_candidate_keeps_the_extent_its_training_rollouts_prefer():
     trials, other, contexts = refits(0.0087, 0.0090, inside)
     assert pipeline.choose_regions(trials, other, contexts, sim)["region_stiffness"].chosen == "one ring"
     assert np.array_equal(contexts["region_stiffness"].region, ring)
-    on_ends = {"region.stretch_scale": 0.1, "region.bending_scale": 201.0}   # both fields on the range's ends
-    trials, other, contexts = refits(0.0087, 0.0050, on_ends)
+    on_ends = {"region.stretch_scale": 0.1, "region.bending_scale": 201.0}   # both fields on the range's ends ...
+    trials, other, contexts = refits(0.0087, 0.0050, on_ends, 0.0060)       # ... and inside rolls out worse
     assert pipeline.choose_regions(trials, other, contexts, sim)["region_stiffness"].chosen == "one ring"
