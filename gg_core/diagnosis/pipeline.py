@@ -26,7 +26,8 @@ from .result import GROWN, ONE_RING, RegionChoice, Result
 from .scan import scan_region
 from .selection import Design, fit, gram, select
 from .starts import in_form, measure, measured_lag, reference_trials, regressed, trial_from_starts
-from .verdict import closest, confirmed, implausible, judge_reference, named_first, propose, unresolved
+from .verdict import (closest, confirmed, implausible, judge_reference, named_first, propose, stopped_on_ends,
+                      unresolved)
 
 if TYPE_CHECKING:
     from ..stages.diagnose import DiagnoseRequest
@@ -100,10 +101,13 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
                               reference_region)
                      for fit_on, held in extra_splits(first.train, first.heldout)]
         folds += run_jobs(_run_fold, fold_jobs, worker_count(req.workers, len(fold_jobs)), progress)
+    fold_stops: dict[str, str] = {}   # verdict.stopped_on_ends judges the split's refit; the folds' are reported
     for fold in folds[1:]:
         for n, t in fold.trials.items():
-            if n not in unphysical and (why := implausible(t, sim.cloth)):
+            if n not in unphysical and (why := implausible(t, sim.cloth, ends=False)):
                 unphysical[n] = f"{why} (refitted without {', '.join(fold.heldout)})"
+            if n not in fold_stops and (why := stopped_on_ends(t)):
+                fold_stops[n] = f"{why} (refitted without {', '.join(fold.heldout)})"
     cv = CrossValidation(folds)
     by_rollouts = cv.ranked([n for n in first.trials if cv.confirmed(n, req.min_gain, req.min_gain_mm)
                              and n not in unphysical])
@@ -154,7 +158,8 @@ def diagnose(req: DiagnoseRequest, train: list[Observed], heldout: list[Observed
     return Result(loc, sel, trials, accepted, null, null_refit, after, baseline,
                   dict(zip(r.labels, r.adjust.tolist())), r.batch, unphysical, progress, cv, reference, timings, scans,
                   withheld, rollouts_first, rivals, delivered, delivered_sim,
-                  None if accepted else closest(cv, unphysical, req.min_gain, req.min_gain_mm), region_choices)
+                  None if accepted else closest(cv, unphysical, req.min_gain, req.min_gain_mm), region_choices,
+                  fold_stops)
 
 
 def choose_regions(trials: dict[str, Trial], grown: dict[str, Trial], contexts: dict[str, Context],

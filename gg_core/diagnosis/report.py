@@ -224,7 +224,7 @@ def write_html(path: Path, report: dict, vertices: np.ndarray, faces: np.ndarray
         f"</td><td>{_share(e['uncertainty']['inclusion_probability'])}</td><td>{html.escape(_fmt_params(e))}</td>"
         f"<td>{_pct(e.get('heldout_gain'))}</td><td>{_pct(e.get('train_rollout_gain'))}</td>"
         f"<td>{_pct((e.get('cross_validated') or {}).get('heldout_gain'))}</td>"
-        f"<td>{html.escape(e.get('implausible') or '')}</td></tr>"
+        f"<td>{html.escape(e.get('implausible') or _fold_stop(e))}</td></tr>"
         for e in report["effects"])
     withheld = "".join(f"<p>Not tried: {html.escape(n)}, {html.escape(why)}.</p>"
                        for n, why in report.get("withheld_candidates", {}).items())
@@ -250,6 +250,13 @@ td,th{{padding:2px 8px;border-bottom:1px solid #ddd}} img{{border:1px solid #ccc
     with atomic_path(path) as tmp:
         tmp.write_text(page)
     return Path(path)
+
+
+def _fold_stop(effect: dict) -> str:
+    """A fold's refit stopped on the candidate's range ends: said beside it, though only the split's refit there
+    refuses the candidate (verdict.stopped_on_ends)."""
+    stop = effect.get("fold_refit_on_range_ends")
+    return f"(noted, not refused: {stop})" if stop else ""
 
 
 def region_sentence(loc: dict) -> str:

@@ -55,6 +55,7 @@ class Result:
     final_sim: ImplicitSimulator | None = None   # ... and its simulator
     closest: dict | None = None        # where nothing was accepted, the candidate nearest to it (verdict.closest)
     region_choices: dict[str, RegionChoice] = field(default_factory=dict)   # refitted on both activity extents
+    fold_stops: dict[str, str] = field(default_factory=dict)   # a fold's refit stopped on its range's ends, and why
 
     def region_of(self, name: str) -> np.ndarray | None:
         """The region candidate `name` acted on: its scan's, the extent its training rollouts chose, or the
@@ -135,6 +136,7 @@ class Result:
                 if self.rollouts_first and self.accepted[:1] == [n] else None,
                 "not_separated_from": self.unseparated if self.accepted == [n] else [],
                 "implausible": self.unphysical.get(n),
+                "fold_refit_on_range_ends": self.fold_stops.get(n),
             })
         return out
 

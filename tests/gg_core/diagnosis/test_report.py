@@ -57,8 +57,10 @@ def test_sentence_and_page(tmp_path):
     assert paired.endswith("the pattern of the residual forces chose gravity offset (it explains more of them in 97% "
                            "of the bootstrap replicates).")
     v, f = sheet(4, 4, 0.5, 0.5)
-    report = {"verdict": "missing", "accepted": ["gravity_offset"], "effects": [EFFECT],
-              "heldout_l2_before": 0.012, "heldout_l2_after": 0.006, "outputs": {},
+    stopped = "the refit stopped on the ends of this candidate range (refitted without walk)"
+    report = {"verdict": "missing", "accepted": ["gravity_offset"],
+              "effects": [{**EFFECT, "fold_refit_on_range_ends": stopped}], "heldout_l2_before": 0.012,
+              "heldout_l2_after": 0.006, "outputs": {},
               "baseline": {"density": 0.2, "viscoelastic_damping.tau": 0.016, "internal_damping_loss_factor": 0.1,
                            "train_rollout_lag_x_mm": 4.42, "train_rollout_lag_z_mm": -0.5,
                            "held_material": ["density"]},
@@ -72,6 +74,7 @@ def test_sentence_and_page(tmp_path):
     assert "Not tried: rest_length_region, not identifiable without an unloaded rest mesh." in page
     assert "viscoelastic_damping.tau 0.016" in page and "loss factor of 0.1 at 1 Hz" in page
     assert "Held at the default, not fitted: density" in page
+    assert f"<td>(noted, not refused: {stopped})</td>" in page
     assert "leave the recordings 4.4 mm along x and -0.5 mm along z on average" in page
     images = re.findall(r'src="data:image/png;base64,([^"]+)"', page)
     assert len(images) == 4

@@ -192,6 +192,8 @@ def test_region_refits_stopped_on_the_ranges_ends_are_refused_where_inside_rolls
     assert "(stretch x0.1, bending x201)" in why and "100 % worse" in why
     assert implausible(region("region_stiffness", 0.0101, stretch=0.1, bending=201.0), sheet) is None
     assert implausible(region("region_stiffness", stretch=0.1, bending=17.4), sheet) is None   # one field inside
+    assert implausible(region("heavy_region", 0.0106, density=0.1), sheet, ends=False) is None   # a fold's refit
+    assert "x0.043" in implausible(region("heavy_region", 0.0106, density=0.043), sheet, ends=False)
 
 
 def test_a_none_reports_the_plausible_candidate_nearest_to_being_named():
