@@ -23,7 +23,9 @@ pipeline._run_fold on each region in the three folds that each hold one recordin
 vertices (precision 80 %, recall 100 %) gained 20.4 / -4.4 / 15.0 % held out, the grown one 33 (94 %, 89 %)
 21.7 / 0.7 / 28.3 %; seed 2, the ring 38 (92 %, 100 %) 17.7 / 4.4 / 39.7 %, the grown one 30 (97 %, 83 %) gained
 less (39.7 -> 11.9 % on the twist's fold). In all six folds the region whose refit rolled the fold's training
-recordings out better also rolled the held-out one out better.
+recordings out better also rolled the held-out one out better. End to end (session 73, gg bench diagnose): seed 1
+chose the grown extent (training rollouts 8.40 against 8.74 mm), -17.1 % over the folds against the ring's -10.3 %
+(the true region -16.2 %); seed 2 kept the ring (9.14 against 9.49 mm), -20.6 % (the true region -19.8 %).
 """
 from __future__ import annotations
 
