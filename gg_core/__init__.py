@@ -1,7 +1,8 @@
 """Gaussian Garments headless core: capture I/O, Gaussian texture and rasterizer, cloth physics, stages.
 
 Never imports bpy (except the bake and synth workers, which run inside the bpy module) so the
-core runs anywhere. Modules reached by the Blender add-on (capture/) use numpy and stdlib only.
+core runs anywhere. Modules reached by the Blender add-on (capture/, geometry/meshio, storage,
+diagnosis/report_regions) use numpy and stdlib only (tests/test_architecture.py walks their imports).
 """
 __version__ = "0.1.0"
 

@@ -17,6 +17,7 @@ from bpy.types import Collection, Context, Object, Operator, Scene
 from ..blender_addon.colormap import heat_colors
 from ..blender_addon.convert import to_blender_points
 from ..blender_addon.meshes import add_mesh_cache, mesh_object, vertex_colors
+from ..gg_core.diagnosis.report_regions import candidate_regions
 from ..gg_core.errors import InputError
 from ..gg_core.geometry.meshio import read_mesh, read_obj
 
@@ -283,8 +284,8 @@ def region_groups(report: dict) -> dict[str, list[int]]:
     loc = report.get("localization", {})
     groups = {"gg_region_maps": loc.get("region_vertices") or [],
               "gg_region_maps_grown": loc.get("grown_region_vertices") or []}
-    for name, own in {**loc.get("scanned_regions", {}), **loc.get("region_choices", {})}.items():
-        groups[f"gg_region_{name}"] = own.get("region_vertices") or []
+    for name, own in candidate_regions(loc).items():
+        groups[f"gg_region_{name}"] = own or []
     return {name: [int(i) for i in indices] for name, indices in groups.items() if indices}
 
 

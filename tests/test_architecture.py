@@ -70,6 +70,49 @@ def test_the_addon_never_imports_torch(folder: str) -> None:
     assert not hits, hits
 
 
+def _local_files(path: Path, module: str, level: int) -> list[Path]:
+    """The repository's source files an import statement in `path` runs: the module (or the package's
+    __init__.py) and every package __init__.py on the way to it; empty for third-party modules."""
+    if level == 0 and _top(module) not in {"gg_core", "blender_addon", "operators"}:
+        return []
+    base = () if level == 0 else path.parent.relative_to(ROOT).parts[:len(path.parent.relative_to(ROOT).parts)
+                                                                          - (level - 1)]
+    parts = [*base, *module.split(".")]
+    files = [ROOT.joinpath(*parts[:i], "__init__.py") for i in range(1, len(parts) + 1)]
+    files += [ROOT.joinpath(*parts[:i]).with_suffix(".py") for i in range(1, len(parts) + 1)]
+    return [f for f in files if f.is_file()]
+
+
+def _optional_import_lines(path: Path) -> set[int]:
+    """Lines of the imports inside a `try:` that catches ImportError: code that runs on without the module."""
+    lines: set[int] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Try) and any(h.type is not None and "ImportError" in ast.unparse(h.type)
+                                             for h in node.handlers):
+            lines |= {n.lineno for stmt in node.body for n in ast.walk(stmt)
+                      if isinstance(n, ast.Import | ast.ImportFrom)}
+    return lines
+
+
+@pytest.mark.parametrize("folder", ["blender_addon", "operators"])
+def test_the_addon_reaches_no_torch_through_gg_core(folder: str) -> None:
+    """Why: an add-on module importing a gg_core module that imports torch fails in a Blender without it, though
+    the add-on's own import statements name no torch."""
+    seen, todo, hits = set(), _sources(folder), []
+    while todo:
+        p = todo.pop()
+        if p in seen:
+            continue
+        seen.add(p)
+        optional = _optional_import_lines(p)
+        for line, m, level in _runtime_imports(p):
+            if level == 0 and _top(m) == "torch" and line not in optional:
+                hits.append(f"{p.relative_to(ROOT)}:{line} imports torch")
+            todo += _local_files(p, m, level)
+    assert not hits, hits
+    assert ROOT / "gg_core" / "storage.py" in seen          # the walk follows the add-on into gg_core
+
+
 def test_gg_core_imports_blender_only_in_its_bpy_workers() -> None:
     hits = [f"{p.relative_to(ROOT)}:{line} imports {m}" for p in _sources("gg_core")
             for line, m, level in _runtime_imports(p)

@@ -46,6 +46,7 @@ import numpy as np
 
 from ..cli import add_vertex_mass_option
 from ..diagnosis.blender_units import offset_tilt, truth_parameters, wind_push
+from ..diagnosis.report_regions import candidate_regions
 from ..storage import exclusive
 
 if TYPE_CHECKING:
@@ -233,8 +234,8 @@ def region_overlap(report: dict, name: str | None, truth: np.ndarray | None) -> 
     if name is None or truth is None:
         return None
     loc = report["localization"]
-    own = loc.get("scanned_regions", {}).get(name) or loc.get("region_choices", {}).get(name)
-    vertices = own["region_vertices"] if own is not None else loc.get("region_vertices")
+    own = candidate_regions(loc)
+    vertices = own[name] if name in own else loc.get("region_vertices")
     if not vertices:
         return None
     found = np.zeros(len(truth), bool)

@@ -115,9 +115,17 @@ def with_terms(terms: list[Term], extra: dict[str, dict]) -> list[Term]:
         [TERMS[n](**p) for n, p in extra.items() if n not in names]
 
 
+REGION_KEYS = ("density", "stretch", "bending", "rest")   # the region fields apply_region scales
+
+
 def region_value(field: str) -> str:
     """The Trial.values key of a region's scale factor on `field` ('stretch' -> 'region.stretch_scale')."""
     return f"region.{field}_scale"
+
+
+def region_scales(values: dict[str, object]) -> dict[str, float]:
+    """The region scale factors among Trial.values, by field (region_value's inverse)."""
+    return {f: float(values[region_value(f)]) for f in REGION_KEYS if region_value(f) in values}
 
 
 def apply_region(cloth: Cloth, region: np.ndarray, logs: dict[str, torch.Tensor | float]) -> None:

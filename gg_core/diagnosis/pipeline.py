@@ -166,15 +166,17 @@ def choose_regions(trials: dict[str, Trial], grown: dict[str, Trial], contexts: 
                    sim: ImplicitSimulator) -> dict[str, RegionChoice]:
     """Each map-region candidate refitted on both extents of the activity region (localize.activity_regions) keeps
     the trial that rolls the training recordings out better, among the physically plausible ones (the ring's where
-    neither is); `trials` and `contexts` are updated in place, so the folds, the joint trial and the final fit use
-    the chosen region. The held-out recordings play no part in the choice."""
+    neither is), and says why any was refused; `trials` and `contexts` are updated in place, so the folds, the joint
+    trial and the final fit use the chosen region. The held-out recordings play no part in the choice."""
     choices = {}
     for name, other in grown.items():
         ring = trials[name]
-        plausible = [t for t in (ring, other) if not implausible(t, sim.cloth)] or [ring]
+        extents = {ONE_RING: ring, GROWN: other}
+        refused = {extent: why for extent, t in extents.items() if (why := implausible(t, sim.cloth))}
+        plausible = [t for extent, t in extents.items() if extent not in refused] or [ring]
         best = min(plausible, key=lambda t: t.train_l2)
-        choices[name] = RegionChoice(best.region, {ONE_RING: ring.train_l2, GROWN: other.train_l2},
-                                     ONE_RING if best is ring else GROWN)
+        choices[name] = RegionChoice(best.region, {e: t.train_l2 for e, t in extents.items()},
+                                     ONE_RING if best is ring else GROWN, refused)
         trials[name] = best
         contexts[name] = replace(contexts[name], region=best.region)
     return choices

@@ -268,11 +268,14 @@ def region_sentence(loc: dict) -> str:
     out = [f"Region candidates act on {len(region)} vertices, singled out because {why}." if region else
            "No garment region stood out in the maps: region candidates that use them were not tried."]
     for name, choice in loc.get("region_choices", {}).items():
-        l2 = choice["train_rollout_l2"]
+        l2 = ", ".join(f"{k} {1e3 * v:.2f} mm" for k, v in choice["train_rollout_l2"].items())
+        kept = f"the {choice['chosen']} extent ({len(choice['region_vertices'])} vertices)"
+        refused = "; ".join(f"the {extent} extent's refit was refused: {why}"      # may have rolled out better
+                            for extent, why in choice.get("refused", {}).items())
         out.append(f"{name} was refitted on that region and on its extent grown through the neighbouring vertices "
-                   f"that stand out less ({len(loc.get('grown_region_vertices') or [])} vertices); the training "
-                   f"rollouts ({', '.join(f'{k} {1e3 * v:.2f} mm' for k, v in l2.items())}) chose the "
-                   f"{choice['chosen']} extent ({len(choice['region_vertices'])} vertices).")
+                   f"that stand out less ({len(loc.get('grown_region_vertices') or [])} vertices); "
+                   + (f"{kept} was kept (training rollouts {l2}): {refused}." if refused
+                      else f"the training rollouts ({l2}) chose {kept}."))
     for name, scan in loc.get("scanned_regions", {}).items():
         if scan["region_vertices"] and scan.get("source") == "field":
             out.append(f"{name} fitted its change vertex by vertex on the training recordings and acts on the "

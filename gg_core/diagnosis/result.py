@@ -24,10 +24,12 @@ ONE_RING, GROWN = "one ring", "grown"   # the activity region's two extents (loc
 @dataclass
 class RegionChoice:
     """A map-region candidate refitted on both extents of the activity region: the training rollout error of each
-    refit and the one kept (pipeline.choose_regions)."""
+    refit, the one kept and why a refit was refused as not cloth physics (pipeline.choose_regions): the kept one
+    need not roll out better."""
     region: np.ndarray
     train_l2: dict[str, float]         # ONE_RING / GROWN -> training rollout error of the refit on that extent
     chosen: str
+    refused: dict[str, str] = field(default_factory=dict)   # ONE_RING / GROWN -> verdict.implausible's reason
 
 
 @dataclass
@@ -186,6 +188,7 @@ class Result:
                                                          "scale": float(np.exp(r.strength))}}
                                                  for n, r in self.scans.items()},
                              "region_choices": {n: {"chosen": c.chosen, "train_rollout_l2": c.train_l2,
+                                                    "refused": c.refused,
                                                     "region_vertices": np.flatnonzero(c.region).tolist()}
                                                 for n, c in self.region_choices.items()},
                              "grown_region_vertices": None if loc.grown is None

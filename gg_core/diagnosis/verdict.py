@@ -7,7 +7,7 @@ import numpy as np
 from ..physics.cloth import Cloth
 from .confirm import INWARD, Trial
 from .folds import CrossValidation
-from .library import BY_NAME
+from .library import BY_NAME, region_scales
 from .selection import Selection
 
 # named_first: the share of bootstrap replicates in which a rival the folds do not separate from the rollouts' first
@@ -75,8 +75,7 @@ def stopped_on_ends(t: Trial) -> str | None:
     that held another recording out is reported (Result.fold_stops) and its gain counts as measured."""
     if t.inward_l2 is None or t.inward_l2 <= (1.0 + INWARD_TOLERANCE) * t.train_l2:
         return None
-    fields = ", ".join(f"{k[len('region.'):-len('_scale')]} x{float(v):.3g}" for k, v in t.values.items()
-                       if k.startswith("region.") and k.endswith("_scale"))
+    fields = ", ".join(f"{k} x{v:.3g}" for k, v in region_scales(t.values).items())
     return (f"the region's refit stopped on the ends of this candidate's range ({fields}), and moved x{INWARD:g} "
             f"inside it rolls the training recordings out {100 * (t.inward_l2 / t.train_l2 - 1):.0f} % worse: it "
             f"has no estimate inside, the term stands in for something else")

@@ -131,6 +131,7 @@ def test_a_map_region_candidate_keeps_the_extent_its_training_rollouts_prefer():
     trials, other, contexts = refits(0.0087, 0.0084, inside)
     choice = pipeline.choose_regions(trials, other, contexts, sim)["region_stiffness"]
     assert choice.chosen == "grown" and choice.train_l2 == {"one ring": 0.0087, "grown": 0.0084}
+    assert choice.refused == {}
     assert trials["region_stiffness"] is other["region_stiffness"]          # its held-out error is worse: unseen
     assert np.array_equal(contexts["region_stiffness"].region, grown) and np.array_equal(choice.region, grown)
     trials, other, contexts = refits(0.0087, 0.0090, inside)
@@ -138,4 +139,7 @@ def test_a_map_region_candidate_keeps_the_extent_its_training_rollouts_prefer():
     assert np.array_equal(contexts["region_stiffness"].region, ring)
     on_ends = {"region.stretch_scale": 0.1, "region.bending_scale": 201.0}   # both fields on the range's ends ...
     trials, other, contexts = refits(0.0087, 0.0050, on_ends, 0.0060)       # ... and inside rolls out worse
-    assert pipeline.choose_regions(trials, other, contexts, sim)["region_stiffness"].chosen == "one ring"
+    choice = pipeline.choose_regions(trials, other, contexts, sim)["region_stiffness"]
+    assert choice.chosen == "one ring" and list(choice.refused) == ["grown"]    # said why, though it rolled out better
+    assert choice.refused["grown"].startswith("the region's refit stopped on the ends of this candidate's range "
+                                              "(stretch x0.1, bending x201)")

@@ -124,6 +124,11 @@ def testregion_sentence_says_where_each_region_candidate_acted():
     assert ("region_stiffness was refitted on that region and on its extent grown through the neighbouring vertices "
             "that stand out less (3 vertices); the training rollouts (one ring 8.74 mm, grown 8.38 mm) chose the "
             "grown extent (3 vertices).") in region_sentence(chose)
+    assert "refused" not in region_sentence(chose)
+    chose["region_choices"]["region_stiffness"].update(chosen="one ring", region_vertices=[5, 6],
+                                                       refused={"grown": "its refit stopped on the ends"})
+    assert ("(3 vertices); the one ring extent (2 vertices) was kept (training rollouts one ring 8.74 mm, grown "
+            "8.38 mm): the grown extent's refit was refused: its refit stopped on the ends.") in region_sentence(chose)
 
 
 def test_the_page_says_what_a_none_could_not_see(tmp_path):
