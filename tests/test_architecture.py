@@ -75,9 +75,8 @@ def _local_files(path: Path, module: str, level: int) -> list[Path]:
     __init__.py) and every package __init__.py on the way to it; empty for third-party modules."""
     if level == 0 and _top(module) not in {"gg_core", "blender_addon", "operators"}:
         return []
-    base = () if level == 0 else path.parent.relative_to(ROOT).parts[:len(path.parent.relative_to(ROOT).parts)
-                                                                          - (level - 1)]
-    parts = [*base, *module.split(".")]
+    package = path.parent.relative_to(ROOT).parts
+    parts = [*(package[:len(package) - (level - 1)] if level else ()), *module.split(".")]
     files = [ROOT.joinpath(*parts[:i], "__init__.py") for i in range(1, len(parts) + 1)]
     files += [ROOT.joinpath(*parts[:i]).with_suffix(".py") for i in range(1, len(parts) + 1)]
     return [f for f in files if f.is_file()]
