@@ -298,14 +298,17 @@ def summary(report: dict) -> str:
     (verdict.unresolved), and the delivered values the recordings do not fix at all (identify.profiles: every
     multiple profiled rolls out about as well), which a user should not read as measured. A `none` names the
     candidate that came closest where it was refitted in every fold and lowered the held-out error there
-    (verdict.closest, report.closest_sentence): weak evidence."""
+    (verdict.closest, report.closest_sentence): weak evidence; and it says when the rest state was a loaded frame or
+    the recordings' noise swamps the cloth's stretching (report.noisy_stretch_caveat): what a `none` may miss."""
     if report.get("verdict") != "missing":
         loaded = "; rest state a loaded frame, a steady load may hide in it" if report.get("rest_mesh_given") is False \
             else ""
+        noisy = "; noise swamps the cloth's stretching, a stiffer region may hide" \
+            if report.get("localization", {}).get("activity_blind") else ""
         near = report.get("closest") or {}
         closest = f"; closest: {near['name']} (held-out error {-near['heldout_gain']:+.1%}, not enough to name it)" \
             if near.get("near_miss") else ""
-        return f"Nothing missing: the simulator explains the recordings{closest}{loaded}"
+        return f"Nothing missing: the simulator explains the recordings{closest}{loaded}{noisy}"
     accepted = report.get("accepted", [])
     if len(accepted) > 1 and report.get("heldout_gain") is not None:
         return f"Missing physics: {' + '.join(accepted)} (held-out error {-report['heldout_gain']:+.0%} together)"

@@ -326,6 +326,8 @@ def run_case(args: argparse.Namespace, effect: str, strength: float, seed: int, 
         "not_separated_from": accepted.get("not_separated_from", []) if accepted else [],   # the class left open
         "implausible": [e["name"] for e in report["effects"] if e.get("implausible")],
         "closest": report.get("closest"),     # where nothing was named: the near miss and why (verdict.closest)
+        "activity_excess": report["localization"].get("activity_excess"),   # localize.activity_map: noise's share
+        "activity_blind": report["localization"].get("activity_blind"),
         "heldout_l2_before": before, "heldout_l2_after": after, "heldout_gain": 1.0 - after / before,
         "cross_validated_gain": cv_gain,
         "true_effect_l2": None if ref is None else ref["heldout_l2"],
@@ -447,6 +449,8 @@ def run(args: argparse.Namespace) -> int:
                           + ("" if not case["closest"] else
                              f" (closest {case['closest']['name']}, {-case['closest']['heldout_gain']:+.0%}"
                              + (" over the folds)" if len(case["closest"]["folds"]) > 1 else ")"))
+                          + ("" if not case["activity_blind"] else
+                             f" (noise swamps the stretching: activity excess {case['activity_excess']:.1f})")
                           + ("" if not case["rollouts_first"] else
                              f" (the rollouts led with {case['rollouts_first']}, the residual chose)")
                           + ("" if not case["not_separated_from"] else

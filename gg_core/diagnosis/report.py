@@ -267,6 +267,8 @@ def region_sentence(loc: dict) -> str:
            "residual": "its residual stands out"}.get(loc.get("region_source", ""), "it stands out")
     out = [f"Region candidates act on {len(region)} vertices, singled out because {why}." if region else
            "No garment region stood out in the maps: region candidates that use them were not tried."]
+    if loc.get("activity_blind"):
+        out.append(noisy_stretch_caveat(loc["activity_excess"]))
     for name, choice in loc.get("region_choices", {}).items():
         l2 = ", ".join(f"{k} {1e3 * v:.2f} mm" for k, v in choice["train_rollout_l2"].items())
         kept = f"the {choice['chosen']} extent ({len(choice['region_vertices'])} vertices)"
@@ -335,6 +337,15 @@ LOADED_REST_CAVEAT = (
     "The rest state was the first training frame, a garment already loaded: a load present in every frame (a steady "
     "wind, tilted gravity) is partly taken into it, and on short recordings that can hide it. Where the unloaded "
     "garment is known (e.g. from its sewing pattern), run again with --rest-mesh.")
+
+
+def noisy_stretch_caveat(excess: float) -> str:
+    """Where the recordings' noise swamps the cloth's own stretching (localize.activity_map's excess), a stiffer
+    region cannot stand out in the deformation activity: said, since a `none` may then miss one."""
+    return (f"The recorded cloth stretches {excess:.1f}x as much as the baseline's rollouts over half the garment: "
+            "that is position noise, not motion, so the deformation activity cannot single out a stiffer region "
+            "(on the benchmark a 30x stiffer patch stayed hidden at 1.5 mm of noise) and one may go unseen; "
+            "less noisy recordings (a finer registration) reveal it.")
 
 
 def _pct(gain: float | None) -> str:

@@ -174,6 +174,7 @@ class Result:
                              "region_vertices": None if loc.region is None else np.flatnonzero(loc.region).tolist(),
                              "region_source": loc.region_source,
                              "activity_z_range": [float(loc.activity_map.min()), float(loc.activity_map.max())],
+                             "activity_excess": loc.activity_excess, "activity_blind": loc.activity_blind,
                              "scanned_regions": {n: {"region_vertices": None if r.region is None
                                                      else np.flatnonzero(r.region).tolist(),
                                                      "source": r.source,

@@ -215,6 +215,13 @@ def test_nothing_missing_is_said_plainly(blender, tmp_path):
     blender.context.scene.gg.project_path = str(tmp_path / "loaded")
     assert blender.ops.gg.show_residuals() == {"FINISHED"}
     assert blender.context.scene.gg.diagnosis.endswith("rest state a loaded frame, a steady load may hide in it")
+    _write_diagnosis(tmp_path / "noisy", {"verdict": "none", "accepted": [],
+                                          "localization": {"activity_excess": 3.7, "activity_blind": True}},
+                     np.zeros(4))
+    blender.context.scene.gg.project_path = str(tmp_path / "noisy")
+    assert blender.ops.gg.show_residuals() == {"FINISHED"}
+    assert blender.context.scene.gg.diagnosis == ("Nothing missing: the simulator explains the recordings; noise "
+                                                  "swamps the cloth's stretching, a stiffer region may hide")
     near = {"name": "wind", "heldout_gain": 0.084, "folds": [{}, {}], "near_miss": True,
             "why_not": ["mean held-out gain +8.4%, under 10%"]}
     _write_diagnosis(tmp_path / "near", {"verdict": "none", "accepted": [], "closest": near}, np.zeros(4))

@@ -7,7 +7,9 @@ from __future__ import annotations
 import numpy as np
 from physics_helpers import sheet
 
-from gg_core.diagnosis.localize import _best, activity_map, activity_regions, standout_region, strain_activity
+from gg_core.diagnosis.localize import (ACTIVITY_BLIND_EXCESS, _best, activity_map, activity_regions, standout_region,
+                                        strain_activity)
+from gg_core.diagnosis.noise import correlated_noise
 from gg_core.geometry.topology import build_topology
 
 
@@ -79,7 +81,8 @@ def test_activity_region_finds_a_stiffer_patch_only():
     edges = build_topology(f, len(v)).edges
     free = np.ones(len(v), bool)
     stiffer, _ = _jiggling_sheet(np.where(patch, 4e-4, 2e-3), seed=2)
-    z = activity_map([stiffer], [simulated], edges, free)
+    z, excess = activity_map([stiffer], [simulated], edges, free)
+    assert 0.8 < excess < 1.25                  # the rest of the sheet stretches as simulated
     region, grown = activity_regions(z, free, edges)
     assert region is not None
     found = region > 0
@@ -89,7 +92,23 @@ def test_activity_region_finds_a_stiffer_patch_only():
     if grown is not None:                    # the hysteresis extent differs from the ring's, and holds the patch too
         assert not np.array_equal(grown, region) and (grown[patch] > 0).all()
     same, _ = _jiggling_sheet(np.full(len(v), 2e-3), seed=3)
-    assert activity_regions(activity_map([same], [simulated], edges, free), free, edges) == (None, None)
+    assert activity_regions(activity_map([same], [simulated], edges, free)[0], free, edges) == (None, None)
     softer, _ = _jiggling_sheet(np.where(patch, 1e-2, 2e-3), seed=4)
-    z_soft = activity_map([softer], [simulated], edges, free)
+    z_soft, _ = activity_map([softer], [simulated], edges, free)
     assert z_soft[patch].mean() > 4 and activity_regions(z_soft, free, edges) == (None, None)
+
+
+def test_activity_excess_says_when_noise_swamps_the_stretching():
+    """Position noise stretches every edge whatever the motion: recorded over simulated activity is then well above
+    one over the whole sheet, the stiffer patch no longer stands out, and the excess says so."""
+    v, _ = sheet(16, 16, 0.6, 0.6)
+    patch = np.linalg.norm(v[:, [0, 2]] - [-0.1, 0.05], axis=1) < 0.1
+    simulated, f = _jiggling_sheet(np.full(len(v), 2e-3), seed=1)
+    edges = build_topology(f, len(v)).edges
+    free = np.ones(len(v), bool)
+    stiffer, _ = _jiggling_sheet(np.where(patch, 4e-4, 2e-3), seed=2)
+    noisy = stiffer + correlated_noise(v, 0.02, 0.05, len(stiffer), np.random.default_rng(5))
+    z, excess = activity_map([noisy], [simulated], edges, free)
+    assert excess > ACTIVITY_BLIND_EXCESS
+    assert activity_regions(z, free, edges) == (None, None)
+    assert activity_map([stiffer], [simulated], edges, free)[1] < ACTIVITY_BLIND_EXCESS

@@ -101,8 +101,13 @@ def testregion_sentence_says_where_each_region_candidate_acted():
                "heavy_region": {"region_vertices": None, "patches": [], "explained": 0.01,
                                 "best_patch_explained": 0.01}}
     text = region_sentence({"region_vertices": [5, 6], "region_source": "deformation activity",
-                             "scanned_regions": scanned})
+                             "scanned_regions": scanned, "activity_excess": 1.1, "activity_blind": False})
     assert text.startswith("Region candidates act on 2 vertices, singled out because it stretches differently")
+    assert "position noise" not in text
+    blind = region_sentence({"region_vertices": None, "activity_excess": 3.74, "activity_blind": True})
+    assert blind.startswith("No garment region stood out in the maps") and ("stretches 3.7x as much as the baseline's "
+                                                                           "rollouts") in blind
+    assert "a stiffer region may go unseen" not in blind and "one may go unseen" in blind
     assert "rest_length_region scanned the garment patch by patch and acts on 3 vertices (2 patches)" in text
     assert ("12.3 % of the residual; the training rollouts chose it, grown from the patches the residual "
             "proposed: a change of x0.89 there takes their error from 12.2 to 9.4 mm before any refit.") in text

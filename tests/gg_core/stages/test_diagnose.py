@@ -58,6 +58,8 @@ def test_hidden_gravity_tilt_is_named_refitted_and_improves_heldout(tilted, tmp_
     lag = report["baseline"]["train_rollout_lag_x_mm"], report["baseline"]["train_rollout_lag_z_mm"]
     assert lag[0] > 3.0 * abs(lag[1]) and lag[0] > 0.5
     assert report["baseline"]["held_material"] == []     # ground truth: the density is fitted
+    # noise-free recordings stretch about as the fitted cloth does: the activity map is not blind
+    assert 0.5 < report["localization"]["activity_excess"] < 1.5 and not report["localization"]["activity_blind"]
     assert report["train_sequences"] == ["a", "b"] and report["heldout_sequences"] == ["c"]
     vertex_map = np.load(project / "diagnose" / "residual_vertex.npy")
     template, _ = read_mesh(project / "diagnose" / "template.ply")
