@@ -13,7 +13,8 @@ stiff-patch capture (seed 1, 35 true vertices): the residual map ranked the patc
 no region), the activity ratio found a 29-vertex region, 83 % of it on the patch (69 % of the patch); seed 2: 33
 vertices, 85 % on the patch (80 % of it). It is not proof of an effect: on the `none` capture of seed 2 it found a
 15-vertex region along the hem (z down to -7.2), whose region trials then gained < 1 % held-out, so confirmation
-said "none". The residual region is the fallback where no activity region stands out.
+said "none". The residual region is the fallback where no activity region stands out, or where the recordings'
+noise swamps the cloth's stretching so that the activity map shows noise (activity_map's excess, map_region).
 
 An activity region comes in two extents: its standout core (z beyond REGION_Z) grown by one ring, and the core
 grown through the connected vertices beyond ACTIVITY_GROW_Z (hysteresis: the region follows the map's own edge).
@@ -190,8 +191,17 @@ def localize(sim: ImplicitSimulator, pooling: Pooling, adjusted: np.ndarray, fea
     vertex_feature = _best(vertex_map[free], {k: f.mean(0)[free] for k, f in features.items()})
     step_feature = _best(step_curve, {k: f[:, free].mean(1) for k, f in features.items()})
     z, excess = activity
-    (region, grown), source = activity_regions(z, free, num.edges), "deformation activity"
-    if region is None:
-        region, source = standout_region(vertex_map, free, num.edges), "residual"
-    return Localization(vertex_map, step_curve, region, vertex_feature, step_feature, z, excess,
-                        source if region is not None else "none", grown)
+    region, grown, source = map_region(z, excess, vertex_map, free, num.edges)
+    return Localization(vertex_map, step_curve, region, vertex_feature, step_feature, z, excess, source, grown)
+
+
+def map_region(z: np.ndarray, excess: float, vertex_map: np.ndarray, free: np.ndarray, edges: np.ndarray
+               ) -> tuple[np.ndarray | None, np.ndarray | None, str]:
+    """(region, its grown extent, source): the activity map's region unless the recordings' noise blinds that map
+    (excess at or above ACTIVITY_BLIND_EXCESS: what stands out there is noise, e.g. the same hem vertices on the
+    noisy `none` captures s7 and s8 of session 76), else the residual map's standout region."""
+    region, grown = (None, None) if excess >= ACTIVITY_BLIND_EXCESS else activity_regions(z, free, edges)
+    if region is not None:
+        return region, grown, "deformation activity"
+    region = standout_region(vertex_map, free, edges)
+    return region, None, "residual" if region is not None else "none"

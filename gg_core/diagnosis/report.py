@@ -344,8 +344,8 @@ def noisy_stretch_caveat(excess: float) -> str:
     region cannot stand out in the deformation activity: said, since a `none` may then miss one."""
     return (f"The recorded cloth stretches {excess:.1f}x as much as the baseline's rollouts over half the garment: "
             "that is position noise, not motion, so the deformation activity cannot single out a stiffer region "
-            "(on the benchmark a 30x stiffer patch stayed hidden at 1.5 mm of noise) and one may go unseen; "
-            "less noisy recordings (a finer registration) reveal it.")
+            "(on the benchmark a 30x stiffer patch stayed hidden at 1.5 mm of noise) and was not used to place one; "
+            "one may go unseen, and less noisy recordings (a finer registration) would reveal it.")
 
 
 def _pct(gain: float | None) -> str:

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 from physics_helpers import sheet
 
-from gg_core.diagnosis.localize import (ACTIVITY_BLIND_EXCESS, _best, activity_map, activity_regions, standout_region,
-                                        strain_activity)
+from gg_core.diagnosis.localize import (ACTIVITY_BLIND_EXCESS, _best, activity_map, activity_regions, map_region,
+                                        standout_region, strain_activity)
 from gg_core.diagnosis.noise import correlated_noise
 from gg_core.geometry.topology import build_topology
 
@@ -112,3 +112,19 @@ def test_activity_excess_says_when_noise_swamps_the_stretching():
     assert excess > ACTIVITY_BLIND_EXCESS
     assert activity_regions(z, free, edges) == (None, None)
     assert activity_map([stiffer], [simulated], edges, free)[1] < ACTIVITY_BLIND_EXCESS
+
+
+def test_a_blind_activity_map_places_no_region_and_the_residual_map_is_used():
+    v, f = sheet(12, 12, 0.6, 0.6)
+    edges = build_topology(f, len(v)).edges
+    free = np.ones(len(v), bool)
+    rng = np.random.default_rng(2)
+    low = np.linalg.norm(v[:, [0, 2]] - [-0.15, 0.1], axis=1) < 0.08
+    hot = np.linalg.norm(v[:, [0, 2]] - [0.15, -0.1], axis=1) < 0.08
+    z = rng.normal(size=len(v)) - 10.0 * low          # the activity map singles out `low`
+    residual = 1.0 + 0.05 * rng.normal(size=len(v)) + hot
+    region, _, source = map_region(z, 1.0, residual, free, edges)
+    assert source == "deformation activity" and (region[low] > 0).all() and not (region[hot] > 0).any()
+    region, grown, source = map_region(z, ACTIVITY_BLIND_EXCESS, residual, free, edges)
+    assert source == "residual" and (region[hot] > 0).all() and not (region[low] > 0).any() and grown is None
+    assert map_region(z, 3.0, np.ones(len(v)), free, edges) == (None, None, "none")
