@@ -74,13 +74,20 @@ def test_strain_activity_follows_the_local_stretching():
     assert activity[inner].max() < 0.2 * np.median(activity[~quiet])
 
 
-def test_activity_region_finds_a_stiffer_patch_only():
+def _stiffer_patch() -> tuple[np.ndarray, ...]:
+    """(vertices, patch, simulated frames, recorded frames, edges, free): a sheet whose recorded patch jiggles 5x less
+    than the simulation says, the rest as simulated."""
     v, _ = sheet(16, 16, 0.6, 0.6)
     patch = np.linalg.norm(v[:, [0, 2]] - [-0.1, 0.05], axis=1) < 0.1
     simulated, f = _jiggling_sheet(np.full(len(v), 2e-3), seed=1)
     edges = build_topology(f, len(v)).edges
     free = np.ones(len(v), bool)
     stiffer, _ = _jiggling_sheet(np.where(patch, 4e-4, 2e-3), seed=2)
+    return v, patch, simulated, stiffer, edges, free
+
+
+def test_activity_region_finds_a_stiffer_patch_only():
+    v, patch, simulated, stiffer, edges, free = _stiffer_patch()
     z, excess = activity_map([stiffer], [simulated], edges, free)
     assert 0.8 < excess < 1.25                  # the rest of the sheet stretches as simulated
     region, grown = activity_regions(z, free, edges)
@@ -101,12 +108,7 @@ def test_activity_region_finds_a_stiffer_patch_only():
 def test_activity_excess_says_when_noise_swamps_the_stretching():
     """Position noise stretches every edge whatever the motion: recorded over simulated activity is then well above
     one over the whole sheet, the stiffer patch no longer stands out, and the excess says so."""
-    v, _ = sheet(16, 16, 0.6, 0.6)
-    patch = np.linalg.norm(v[:, [0, 2]] - [-0.1, 0.05], axis=1) < 0.1
-    simulated, f = _jiggling_sheet(np.full(len(v), 2e-3), seed=1)
-    edges = build_topology(f, len(v)).edges
-    free = np.ones(len(v), bool)
-    stiffer, _ = _jiggling_sheet(np.where(patch, 4e-4, 2e-3), seed=2)
+    v, patch, simulated, stiffer, edges, free = _stiffer_patch()
     noisy = stiffer + correlated_noise(v, 0.02, 0.05, len(stiffer), np.random.default_rng(5))
     z, excess = activity_map([noisy], [simulated], edges, free)
     assert excess > ACTIVITY_BLIND_EXCESS
