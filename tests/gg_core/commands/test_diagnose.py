@@ -76,6 +76,7 @@ def test_diagnose_command_prints_the_verdict(tmp_path, capsys):
     assert line["verdict"] in ("none", "missing") and line["report"].endswith("diagnose.json")
     near = line["closest"]     # a none's near miss, with what it lacked; nothing beside a named effect
     assert near is None if line["verdict"] == "missing" else (near is None or near["why_not"])
+    assert line["noise_hides_regions"] is False       # a noise-free capture of our own simulator
     assert (tmp_path / "p" / "reports" / "diagnose.html").is_file()
 
 
