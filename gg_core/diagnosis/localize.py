@@ -54,7 +54,7 @@ class Localization:
     vertex_feature: tuple[str, float]  # best-correlated feature of the map (name, Spearman rho)
     step_feature: tuple[str, float]
     activity_map: np.ndarray           # [V] robust z of log(recorded / simulated strain activity), 0 on pins
-    activity_excess: float             # median of recorded / simulated strain activity (activity_excess)
+    activity_excess: float             # median of recorded / simulated strain activity (activity_map)
     region_source: str                 # "deformation activity", "residual" or "none"
     grown: np.ndarray | None = None    # [V] the activity region grown by hysteresis, where it differs from `region`
 
@@ -150,11 +150,11 @@ def activity_map(recorded: list[np.ndarray], simulated: list[np.ndarray], edges:
     rollouts everywhere, the map compares noise with motion and a stiffer region cannot stand out. Measured on the
     benchmark's captures (session 77, the diagnosis's own baselines, /work/data/s77/act): 0.90-1.31 without noise
     (`none` s1, gravity s1, wind s2, air damping s1, stiff patch s1-s3, whose patches stand out at z -6.4 to -7.3);
-    2.34-2.95 at 0.5 mm of noise (stiff patch s1, s2), 3.35 at 1.0 mm and 3.2-4.0 at 1.5 mm (`none` s7, gravity s1,
-    air damping s2, stiff patch s1-s3), where the smoothed recordings' edge strain varies by 0.84 % against the
-    noise-free recording's 0.08 % and the 30x stiffer patch's z is -1.3 to -2.4 (-1.6 / -2.1 at 0.5 mm): no region,
-    and `gg bench diagnose` answered none on stiff patch s1 at 1.5 mm. ACTIVITY_BLIND_EXCESS sits between the two
-    groups (the geometric mean of 1.31 and 2.34)."""
+    with noise 2.34-4.02: 2.66 at 0.25 mm (stiff patch s1), 2.34 / 2.95 at 0.5 mm (s2 / s1), 3.35 at 1.0 mm (s1) and
+    3.2-4.0 at 1.5 mm (`none` s7, gravity s1, air damping s2, stiff patch s1-s3), where the smoothed recordings'
+    edge strain varies by 0.84 % against the noise-free recording's 0.08 % and the 30x stiffer patch's z is -1.3 to
+    -2.4 (-1.6 / -2.1 at 0.5 mm, -0.6 at 0.25 mm): no region, and `gg bench diagnose` answered none on stiff patches
+    s1 / s2 at 1.5 mm. ACTIVITY_BLIND_EXCESS sits between the two groups (the geometric mean of 1.31 and 2.34)."""
     rec = np.mean([strain_activity(f, edges) for f in recorded], 0)
     sim = np.mean([strain_activity(f, edges) for f in simulated], 0)
     tiny = 1e-12 + 1e-6 * float(np.median(rec[free]))
