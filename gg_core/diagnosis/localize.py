@@ -60,8 +60,13 @@ class Localization:
 
     @property
     def activity_blind(self) -> bool:
-        """The recordings stretch so much more than any fitted cloth that their noise hides a stiffer region."""
-        return self.activity_excess >= ACTIVITY_BLIND_EXCESS
+        return noise_blinds_activity(self.activity_excess)
+
+
+def noise_blinds_activity(excess: float) -> bool:
+    """The recordings stretch so much more than any fitted cloth (activity_map's excess) that their noise hides a
+    stiffer region from the activity map: the one rule map_region and the report read."""
+    return excess >= ACTIVITY_BLIND_EXCESS
 
 
 def _smooth(field: np.ndarray, edges: np.ndarray, passes: int = 2) -> np.ndarray:
@@ -200,7 +205,7 @@ def map_region(z: np.ndarray, excess: float, vertex_map: np.ndarray, free: np.nd
     """(region, its grown extent, source): the activity map's region unless the recordings' noise blinds that map
     (excess at or above ACTIVITY_BLIND_EXCESS: what stands out there is noise, e.g. the same hem vertices on the
     noisy `none` captures s7 and s8 of session 76), else the residual map's standout region."""
-    region, grown = (None, None) if excess >= ACTIVITY_BLIND_EXCESS else activity_regions(z, free, edges)
+    region, grown = (None, None) if noise_blinds_activity(excess) else activity_regions(z, free, edges)
     if region is not None:
         return region, grown, "deformation activity"
     region = standout_region(vertex_map, free, edges)
